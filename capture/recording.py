@@ -1,0 +1,42 @@
+"""The recording contract of RECORDING.md in code: topics, message types, frames, writer, reader.
+
+Everything another package needs of the recording format is importable from here.
+"""
+
+from __future__ import annotations
+
+from capture.errors import RecordingError
+from capture.frames import (
+    LABEL_COLORS,
+    LABEL_NAMES,
+    NUM_LABELS,
+    OBJECT_LABELS,
+    STRUCTURAL_LABELS,
+    VOC_TO_LABEL,
+    Extrinsics,
+    GroundTruth,
+    Intrinsics,
+    RgbdFrame,
+)
+from capture.mcap_reader import RecordingReader, TopicInfo
+from capture.mcap_writer import RecordingWriter
+from capture.ros_msgs import DEFAULT_NAMESPACE, GT_CLOUD_ATTACHMENT
+
+__all__ = [
+    "DEFAULT_NAMESPACE",
+    "GT_CLOUD_ATTACHMENT",
+    "LABEL_COLORS",
+    "LABEL_NAMES",
+    "NUM_LABELS",
+    "OBJECT_LABELS",
+    "STRUCTURAL_LABELS",
+    "VOC_TO_LABEL",
+    "Extrinsics",
+    "GroundTruth",
+    "Intrinsics",
+    "RecordingError",
+    "RecordingReader",
+    "RecordingWriter",
+    "RgbdFrame",
+    "TopicInfo",
+]

@@ -1,0 +1,111 @@
+"""ROS 2 message definitions (full concatenated .msg text) and topic names of RECORDING.md."""
+
+from __future__ import annotations
+
+from typing import Final
+
+DEFAULT_NAMESPACE: Final = "/camera/camera"
+COLOR_FRAME_ID: Final = "camera_color_optical_frame"
+DEPTH_FRAME_ID: Final = "camera_depth_optical_frame"
+LINK_FRAME_ID: Final = "camera_link"
+WORLD_FRAME_ID: Final = "world"
+
+# Topic suffixes under the namespace; readers discover namespaces by these.
+COLOR_IMAGE: Final = "/color/image_raw"
+COLOR_COMPRESSED: Final = "/color/image_raw/compressed"
+COLOR_INFO: Final = "/color/camera_info"
+DEPTH_IMAGE: Final = "/depth/image_rect_raw"
+DEPTH_INFO: Final = "/depth/camera_info"
+ALIGNED_DEPTH_IMAGE: Final = "/aligned_depth_to_color/image_raw"
+ALIGNED_DEPTH_INFO: Final = "/aligned_depth_to_color/camera_info"
+EXTRINSICS: Final = "/extrinsics/depth_to_color"
+COLOR_METADATA: Final = "/color/metadata"
+DEPTH_METADATA: Final = "/depth/metadata"
+TF_STATIC: Final = "/tf_static"
+GT_POSE: Final = "/ground_truth/pose"
+GT_LABELS: Final = "/ground_truth/labels"
+GT_INSTANCES: Final = "/ground_truth/instances"
+GT_CLOUD_ATTACHMENT: Final = "ground_truth_cloud.ply"
+
+IMAGE: Final = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE: Final = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO: Final = "sensor_msgs/msg/CameraInfo"
+POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
+TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
+RS_EXTRINSICS: Final = "realsense2_camera_msgs/msg/Extrinsics"
+RS_METADATA: Final = "realsense2_camera_msgs/msg/Metadata"
+
+_SEP = "=" * 80
+
+_TIME = "int32 sec\nuint32 nanosec\n"
+_HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
+_POINT = "float64 x\nfloat64 y\nfloat64 z\n"
+_QUATERNION = "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+_VECTOR3 = "float64 x\nfloat64 y\nfloat64 z\n"
+_ROI = "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n"
+
+
+def _concat(main: str, *deps: tuple[str, str]) -> str:
+    parts = [main]
+    for name, text in deps:
+        parts.append(f"{_SEP}\nMSG: {name}\n{text}")
+    return "\n".join(parts)
+
+
+MSG_DEFS: Final[dict[str, str]] = {
+    IMAGE: _concat(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
+        "uint8 is_bigendian\nuint32 step\nuint8[] data\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+    ),
+    COMPRESSED_IMAGE: _concat(
+        "std_msgs/Header header\nstring format\nuint8[] data\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+    ),
+    CAMERA_INFO: _concat(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\n"
+        "float64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\n"
+        "uint32 binning_y\nRegionOfInterest roi\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+        ("sensor_msgs/RegionOfInterest", _ROI),
+    ),
+    POSE_STAMPED: _concat(
+        "std_msgs/Header header\nPose pose\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+        ("geometry_msgs/Pose", "Point position\nQuaternion orientation\n"),
+        ("geometry_msgs/Point", _POINT),
+        ("geometry_msgs/Quaternion", _QUATERNION),
+    ),
+    TF_MESSAGE: _concat(
+        "geometry_msgs/TransformStamped[] transforms\n",
+        (
+            "geometry_msgs/TransformStamped",
+            "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+        ),
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+        ("geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"),
+        ("geometry_msgs/Vector3", _VECTOR3),
+        ("geometry_msgs/Quaternion", _QUATERNION),
+    ),
+    RS_EXTRINSICS: "float64[9] rotation\nfloat64[3] translation\n",
+    RS_METADATA: _concat(
+        "std_msgs/Header header\nstring json_data\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+    ),
+}
+
+
+def stamp(stamp_ns: int) -> dict[str, int]:
+    """Return a builtin_interfaces/Time dict for a stamp in nanoseconds."""
+    return {"sec": stamp_ns // 1_000_000_000, "nanosec": stamp_ns % 1_000_000_000}
+
+
+def stamp_ns_of(msg_stamp: object) -> int:
+    """Return the nanoseconds of a decoded builtin_interfaces/Time."""
+    return int(getattr(msg_stamp, "sec")) * 1_000_000_000 + int(getattr(msg_stamp, "nanosec"))  # noqa: B009
