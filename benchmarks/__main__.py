@@ -1,0 +1,38 @@
+"""`make bench`: run every benchmark module and print one table."""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+
+from rich.console import Console
+from rich.table import Table
+
+import benchmarks
+from benchmarks.common import Row
+
+
+def main(selected: list[str]) -> int:
+    """Run the `bench_*` modules (all, or those named) and print their rows."""
+    rows: list[Row] = []
+    names = sorted(i.name for i in pkgutil.iter_modules(benchmarks.__path__) if i.name.startswith("bench_"))
+    for name in names:
+        if selected and not any(s in name for s in selected):
+            continue
+        module = importlib.import_module(f"benchmarks.{name}")
+        print(f"running {name} ...", file=sys.stderr, flush=True)
+        rows.extend(module.run())
+    table = Table(title="semreplay benchmarks (ratio > 1: we are better)")
+    for col in ("area", "metric", "ours", "reference", "ratio", "goal", "reference source"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(
+            r.area, f"{r.metric} [{r.unit}]", f"{r.ours:.4g}", f"{r.reference:.4g}", f"{r.ratio:.2f}x", r.goal, r.source
+        )
+    Console(width=200).print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
