@@ -1,0 +1,130 @@
+"""ReplayConfig: one frozen dataclass per stage, loaded from TOML, written next to every output."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Any, Final
+
+from process.depth import DepthConfig
+from process.errors import ConfigError
+from process.fusion import FusionConfig
+from process.odometry import OdometryConfig
+from process.refine import RefineConfig
+from process.segmentation.config import SegmentationConfig
+
+STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class ReplayConfig:
+    """Every setting of `semreplay-process`, one section per stage."""
+
+    depth: DepthConfig = dataclasses.field(default_factory=DepthConfig)
+    odometry: OdometryConfig = dataclasses.field(default_factory=OdometryConfig)
+    segmentation: SegmentationConfig = dataclasses.field(default_factory=SegmentationConfig)
+    fusion: FusionConfig = dataclasses.field(default_factory=FusionConfig)
+    refine: RefineConfig = dataclasses.field(default_factory=RefineConfig)
+
+
+def load_config(path: Path | None) -> ReplayConfig:
+    """Return the defaults overridden by the TOML file at `path` (None: the defaults).
+
+    Raises:
+        ConfigError: the file is missing or not TOML, a section or key is unknown, a value has
+            the wrong type or is out of range.
+    """
+    if path is None:
+        return ReplayConfig()
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError as err:
+        raise ConfigError(f"config file not found: {path}") from err
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(f"config is not valid TOML ({err}): {path}") from err
+    return _build(ReplayConfig, data, where="", path=Path(path))
+
+
+def _build(cls: type[Any], data: dict[str, Any], *, where: str, path: Path) -> Any:
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls)
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        section = f"[{where}]" if where else "top level"
+        raise ConfigError(
+            f"unknown key(s) {unknown} in {section}; valid keys: {sorted(fields)}: {path}"
+        )
+    values: dict[str, Any] = {}
+    for name, value in data.items():
+        key = f"{where}.{name}" if where else name
+        hint = hints[name]
+        if dataclasses.is_dataclass(hint):
+            if not isinstance(value, dict):
+                raise ConfigError(f"'{key}' must be a table [{key}], found {value!r}: {path}")
+            values[name] = _build(typing.cast(type[Any], hint), value, where=key, path=path)
+        else:
+            values[name] = _coerce(value, hint, key=key, path=path)
+    try:
+        return cls(**values)
+    except ConfigError as err:
+        raise ConfigError(f"{err}: {path}") from err
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"invalid [{where}] section ({err}): {path}") from err
+
+
+def _coerce(value: Any, hint: Any, *, key: str, path: Path) -> Any:
+    """Check a TOML value against a field's type; ints are accepted where floats are."""
+    origin = typing.get_origin(hint)
+    options = typing.get_args(hint) if origin in (typing.Union, types.UnionType) else (hint,)
+    for option in options:
+        base = typing.get_origin(option) or option
+        if base is float and isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value)
+        if base is tuple and isinstance(value, list):
+            return tuple(value)
+        if base is bool and isinstance(value, bool):
+            return value
+        if base in (int, str) and isinstance(value, base) and not isinstance(value, bool):
+            return value
+        if option is type(None) and value is None:
+            return value
+    expected = " or ".join(getattr(o, "__name__", str(o)) for o in options)
+    raise ConfigError(f"'{key}' must be {expected}, found {value!r}: {path}")
+
+
+def to_toml(cfg: ReplayConfig) -> str:
+    """Return the effective config as TOML text (the `config.toml` of every output folder)."""
+    lines = ["# Effective configuration of this run (defaults plus --config overrides)."]
+    for section in dataclasses.fields(cfg):
+        lines.append(f"\n[{section.name}]")
+        for f in dataclasses.fields(getattr(cfg, section.name)):
+            value = getattr(getattr(cfg, section.name), f.name)
+            if value is None:
+                continue  # TOML has no null: an absent key means "the default (none)"
+            lines.append(f"{f.name} = {_toml_value(value)}")
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, tuple | list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {value!r} to TOML")
+
+
+def resolve_stages(spec: str) -> tuple[str, ...]:
+    """Return the stages to run for `--stages` (a stage name, or a comma list; later ones imply earlier ones)."""
+    names = [s.strip() for s in spec.split(",") if s.strip()]
+    bad = [n for n in names if n not in STAGES]
+    if bad or not names:
+        raise ConfigError(f"unknown stage(s) {bad or [spec]}; valid stages, in order: {', '.join(STAGES)}")
+    last = max(STAGES.index(n) for n in names)
+    return STAGES[: last + 1]
