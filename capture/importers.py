@@ -100,6 +100,11 @@ def import_dataset(kind: str, src: Path, out: Path, *, compression: str = "zstd"
     dataset = loaders[kind](src)
     if not dataset.frames:
         raise ImportFormatError(f"the {kind} dataset lists no complete colour+depth frame: {src}")
+    absent = next((p for f in dataset.frames for p in (f.color, f.depth) if not p.is_file()), None)
+    if absent is not None:
+        raise ImportFormatError(
+            f"expected the image that the {kind} dataset lists, found none: {absent}"
+        )
     part = out.with_suffix(".mcap.part")
     try:
         _write(dataset, part, kind=kind, src=src, compression=compression)

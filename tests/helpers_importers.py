@@ -16,10 +16,11 @@ from capture.recording import RecordingReader
 W, H = 640, 480
 
 # TUM folder: rgb and depth stamps chosen so that associate.py's greedy rule decides.
-TUM_RGB_S = ("1.000000", "1.033000", "1.066000", "1.100000", "1.133000")
-TUM_DEPTH_S = ("1.005000", "1.030000", "1.052000", "1.120000")
+TUM_RGB_S = ("1.000000", "1.033000", "1.066000", "1.105000", "1.133000", "1.200000", "1.300000")
+TUM_DEPTH_S = ("1.005000", "1.030000", "1.052000", "1.120000", "1.220000", "1.280000")
 # (1.033, 1.030) 3 ms, (1.000, 1.005) 5 ms, (1.133, 1.120) 13 ms, (1.066, 1.052) 14 ms; then
-# (1.033, 1.052) is taken, and (1.100, 1.120) is exactly 20 ms: not < 0.02 s, so 1.100 is dropped.
+# (1.105, 1.120) at 15 ms and (1.033, 1.052) find a stamp taken (in file order 1.105 would have
+# won 1.120); (1.200, 1.220) and (1.300, 1.280) are exactly 0.02 s apart, not < 0.02 s.
 TUM_PAIRS = ((0, 0), (1, 1), (2, 2), (4, 3))  # (rgb index, depth index)
 TUM_GT_S = tuple(f"{0.99 + 0.01 * i:.2f}" for i in range(8))  # 0.99 .. 1.06 at 100 Hz
 # Raw TUM depth units (5000 per metre) in the top-left corner of every depth image, and their mm.

@@ -91,3 +91,12 @@ def test_redwood_pose_for_a_frame_that_does_not_exist_is_refused(tmp_path: Path)
     src = write_redwood(tmp_path / "rw", frames=2, posed=(0, 5))
     with pytest.raises(ImportFormatError, match=r"frames 0\.\.1, found one for frame 5"):
         import_dataset("redwood", src, tmp_path / "o.mcap")
+
+
+def test_a_listed_image_that_does_not_exist_is_refused_before_writing(
+    folders: dict[str, Path], tmp_path: Path
+) -> None:
+    (folders["tum"] / "rgb" / "1.066000.png").unlink()
+    with pytest.raises(ImportFormatError, match=r"found none: .*rgb/1\.066000\.png$"):
+        import_dataset("tum", folders["tum"], tmp_path / "o.mcap")
+    assert not (tmp_path / "o.mcap").exists()
