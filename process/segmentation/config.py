@@ -1,0 +1,55 @@
+"""Configuration and result types of the segmentation stage (no torch import here)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from process.errors import ConfigError
+
+BACKENDS: Final = ("torch", "onnx", "tflite")
+DEVICES: Final = ("auto", "cpu", "cuda")
+
+
+@dataclass(frozen=True)
+class SegmentationConfig:
+    """The `[segmentation]` section: which weights, which runtime, at what resolution."""
+
+    weights: str = ""  # "" = samples/segmentation.safetensors; a path; or "torchvision:NAME"
+    backend: str = "torch"  # torch | onnx (onnxruntime) | tflite (ai-edge-litert, .tflite weights)
+    device: str = "auto"  # auto = CUDA when present (torch backend)
+    threads: int = 0  # CPU threads for the runtime; 0 = the runtime's default
+    batch_size: int = 4  # keyframes per forward pass
+    short_side_px: int = 0  # network input short side; 0 = what the checkpoint was trained at
+    channels_last: bool = True  # NHWC memory format for the torch backend (faster on CPU)
+    structural_to_background: bool = False  # report ceiling/floor/wall (1-3) as 0
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise ConfigError(
+                f"segmentation.backend must be one of {list(BACKENDS)}, got {self.backend!r}"
+            )
+        if self.device not in DEVICES:
+            raise ConfigError(
+                f"segmentation.device must be one of {list(DEVICES)}, got {self.device!r}"
+            )
+        if not 0 <= self.threads <= 256:
+            raise ConfigError(f"segmentation.threads must be in [0, 256], got {self.threads}")
+        if not 1 <= self.batch_size <= 64:
+            raise ConfigError(f"segmentation.batch_size must be in [1, 64], got {self.batch_size}")
+        if self.short_side_px != 0 and not 32 <= self.short_side_px <= 2048:
+            raise ConfigError(
+                "segmentation.short_side_px must be 0 (checkpoint's) or in [32, 2048], "
+                f"got {self.short_side_px}"
+            )
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """The segmentation of one colour image."""
+
+    labels: npt.NDArray[np.uint8]  # (H, W) RECORDING.md label ids
+    confidence: npt.NDArray[np.float32]  # (H, W) probability of the chosen label, in [0, 1]

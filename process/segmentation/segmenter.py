@@ -1,0 +1,128 @@
+"""The segmentation stage: keyframe colour images in, RECORDING.md labels and confidence out."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+import torch
+from torch.nn import functional as F  # noqa: N812 (the torch convention)
+
+from capture.recording import STRUCTURAL_LABELS, VOC_TO_LABEL
+from process.errors import ModelError, StageError
+from process.segmentation.config import Segmentation, SegmentationConfig
+from process.segmentation.runtimes import OnnxRuntime, Runtime, TorchRuntime, pick_device
+from process.segmentation.tflite_runtime import TfliteRuntime
+from process.segmentation.weights import Checkpoint, load_checkpoint, resolve_weights
+
+logger = logging.getLogger(__name__)
+
+
+class Segmenter:
+    """Segment colour images with a DeepLab network on the configured runtime.
+
+    Usage: `Segmenter(cfg.segmentation).segment(frame.color) -> Segmentation`.
+    """
+
+    def __init__(
+        self, cfg: SegmentationConfig, *, weights: Path | None = None, device: str = "auto"
+    ) -> None:
+        self.cfg = cfg
+        spec = weights if weights is not None else cfg.weights
+        device = device if device != "auto" else cfg.device
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        path = resolve_weights(spec)
+        self.weights_path = path
+        self.short_side_px = 0
+        self.runtime: Runtime
+        if cfg.backend == "tflite":
+            if path.suffix != ".tflite":
+                raise ModelError(
+                    f"the tflite backend needs a .tflite model, found {path.suffix!r}: {path}"
+                )
+            self.runtime = TfliteRuntime(
+                path, threads=cfg.threads, class_to_label=self._labels(VOC_TO_LABEL)
+            )
+            self.device = "cpu"
+            return
+        ckpt = load_checkpoint(path)
+        ckpt = replace(ckpt, class_to_label=self._labels(ckpt.class_to_label))
+        self.short_side_px = cfg.short_side_px or ckpt.short_side_px
+        self.checkpoint_info = ckpt.info
+        self.runtime = self._runtime(ckpt, device)
+        logger.info(
+            "segmentation: %s on %s (%s), short side %d px",
+            path.name,
+            cfg.backend,
+            self.device,
+            self.short_side_px,
+        )
+
+    def _labels(self, class_to_label: tuple[int, ...]) -> tuple[int, ...]:
+        if not self.cfg.structural_to_background:
+            return class_to_label
+        return tuple(0 if v in STRUCTURAL_LABELS else v for v in class_to_label)
+
+    def _runtime(self, ckpt: Checkpoint, device: str) -> Runtime:
+        if self.cfg.backend == "onnx":
+            self.device = "cpu"
+            return OnnxRuntime(ckpt, threads=self.cfg.threads)
+        self.device = str(pick_device(device))
+        return TorchRuntime(ckpt, device=device, channels_last=self.cfg.channels_last)
+
+    def input_size(self, height: int, width: int) -> tuple[int, int]:
+        """Return the (width, height) at which an image of this size goes through the network."""
+        if self.runtime.fixed_input_size is not None:
+            return self.runtime.fixed_input_size
+        scale = self.short_side_px / min(height, width)
+        return max(16, round(width * scale)), max(16, round(height * scale))
+
+    def segment(self, color: npt.NDArray[np.uint8]) -> Segmentation:
+        """Segment one (H, W, 3) uint8 RGB image."""
+        return self.segment_batch([color])[0]
+
+    def segment_batch(self, colors: Sequence[npt.NDArray[np.uint8]]) -> list[Segmentation]:
+        """Segment images in batches of `batch_size` (images of equal size share a batch)."""
+        for c in colors:
+            if c.ndim != 3 or c.shape[2] != 3 or c.dtype != np.uint8:
+                raise StageError(
+                    f"segmentation expects (H, W, 3) uint8 RGB images, found {c.shape} {c.dtype}"
+                )
+        out: list[Segmentation] = []
+        start = 0
+        while start < len(colors):
+            shape = colors[start].shape
+            stop = start
+            while (
+                stop < len(colors)
+                and stop - start < self.cfg.batch_size
+                and colors[stop].shape == shape
+            ):
+                stop += 1
+            out += self._run(colors[start:stop])
+            start = stop
+        return out
+
+    def _run(self, colors: Sequence[npt.NDArray[np.uint8]]) -> list[Segmentation]:
+        h, w = colors[0].shape[:2]
+        size = self.input_size(h, w)
+        shrink = size[0] * size[1] < w * h
+        interp = cv2.INTER_AREA if shrink else cv2.INTER_LINEAR
+        batch = np.stack(
+            [c if (w, h) == size else cv2.resize(c, size, interpolation=interp) for c in colors]
+        ).astype(np.uint8, copy=False)
+        probs = self.runtime(batch)
+        if probs.shape[2:] != (h, w):
+            probs = F.interpolate(probs.float(), size=(h, w), mode="bilinear", align_corners=False)
+        confidence, labels = probs.max(dim=1)
+        labels_np = labels.to(torch.uint8).cpu().numpy()
+        conf_np = confidence.clamp_(0.0, 1.0).float().cpu().numpy()
+        return [
+            Segmentation(labels=labels_np[i], confidence=conf_np[i]) for i in range(len(colors))
+        ]

@@ -1,0 +1,95 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from helpers_seg import SCENE_COLORS, synthetic_scene, write_labelled_recording
+
+from process.errors import ConfigError, StageError
+from process.segmentation import SegmentationConfig, Segmenter
+from process.segmentation.dataset import augment_pair, class_weights, color_jitter, load_labelled
+from process.segmentation.metrics import IGNORE, confusion_matrix, iou_per_label, mean_iou
+from process.segmentation.train import EpochStats, TrainConfig, train
+from process.segmentation.weights import load_checkpoint
+
+TINY = TrainConfig(
+    arch="deeplabv3plus_lite_mobilenet_v3_small", short_side_px=96, crop_hw=(64, 96), batch_size=4,
+    lr=5e-3, every_nth=1, threads=2,
+)  # fmt: skip
+
+
+def test_iou_matches_a_hand_computed_example() -> None:
+    gt = np.array([[0, 0, 1, 1], [0, 0, 1, 1], [2, 2, 2, IGNORE]])
+    pred = np.array([[0, 1, 1, 1], [0, 0, 1, 2], [2, 2, 0, 0]])
+    conf = confusion_matrix(pred, gt, num_labels=3)
+    # TP / (TP + FP + FN): label 0: 3/(3+1+1); label 1: 3/(3+1+1); label 2: 2/(2+1+1)
+    assert iou_per_label(conf) == pytest.approx({0: 0.6, 1: 0.6, 2: 0.5})
+    assert mean_iou(conf) == pytest.approx(1.7 / 3)
+
+
+def test_metrics_skip_labels_absent_from_ground_truth() -> None:
+    conf = confusion_matrix(np.array([0, 5]), np.array([0, 0]))
+    assert iou_per_label(conf) == {0: 0.5}
+
+
+def test_augmentation_moves_colour_and_labels_together() -> None:
+    rng = np.random.default_rng(0)
+    color, labels = synthetic_scene(rng)
+    for seed in range(5):
+        c, lab = augment_pair(
+            color, labels, crop_hw=(64, 80), scale_range=(0.5, 1.5), rng=np.random.default_rng(seed)
+        )
+        assert c.shape == (64, 80, 3) and lab.shape == (64, 80)
+        for label in set(np.unique(lab)) - {
+            IGNORE
+        }:  # the scene's colours stay attached to their labels
+            mean = c[lab == label].mean(axis=0)
+            expected = SCENE_COLORS[int(label)]
+            assert np.abs(mean - expected).max() < 40
+        assert (c[lab == IGNORE] == 0).all()  # padding is black and not evaluated
+
+
+def test_color_jitter_stays_in_range_and_changes_images() -> None:
+    x = torch.rand(4, 3, 8, 8)
+    y = color_jitter(x, strength=0.4, generator=torch.Generator().manual_seed(0))
+    assert y.min() >= 0 and y.max() <= 1 and not torch.allclose(x, y)
+
+
+def test_class_weights_favour_rare_labels() -> None:
+    labels = np.zeros(1000, np.uint8)
+    labels[:10] = 9
+    w = class_weights(labels, power=1.0)
+    assert w[9] > 1.0 > w[0]
+
+
+def test_loading_needs_ground_truth_labels(recording: Path) -> None:
+    with pytest.raises(StageError, match="ground_truth/labels"):
+        load_labelled([recording], short_side_px=96)
+
+
+def test_tiny_training_run_lowers_the_loss_and_writes_a_usable_checkpoint(tmp_path: Path) -> None:
+    rec = write_labelled_recording(tmp_path / "train.mcap", frames=8, seed=1)
+    val = write_labelled_recording(tmp_path / "val.mcap", frames=4, seed=2)
+    seen: list[EpochStats] = []
+    out = tmp_path / "tiny.safetensors"
+    result = train(
+        [rec], out=out, val=[val], epochs=6, seed=0, cfg=TINY, progress=False, on_epoch=seen.append
+    )
+    losses = [h.loss for h in result.history]
+    assert len(seen) == 6 and losses[-1] < 0.7 * losses[0]
+    assert all(h.val_miou is not None and 0 <= h.val_miou <= 1 for h in result.history)
+    ckpt = load_checkpoint(out)
+    assert ckpt.info["seed"] == 0 and ckpt.info["epoch"] == result.best_epoch
+    assert ckpt.short_side_px == 96
+    color, _ = synthetic_scene(np.random.default_rng(3))
+    seg = Segmenter(SegmentationConfig(weights=str(out))).segment(color)
+    assert seg.labels.shape == (96, 128)
+
+
+def test_train_config_rejects_bad_values() -> None:
+    with pytest.raises(ConfigError, match="arch"):
+        TrainConfig(arch="vgg")
+    with pytest.raises(ConfigError, match="scale_range"):
+        TrainConfig(scale_range=(1.5, 1.0))
