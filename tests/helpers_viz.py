@@ -35,9 +35,9 @@ class RrdContents:
         """Return every entity path with data, static or not."""
         return set(self.columns)
 
-    def column(self, entity: str, name: str) -> list[object]:
+    def column(self, entity: str, name: str) -> list[Any]:
         """Return the values of one component column of an entity, chunk after chunk."""
-        out: list[object] = []
+        out: list[Any] = []
         for chunk in self.chunks:
             if chunk.entity_path == entity:
                 batch = chunk.to_record_batch()

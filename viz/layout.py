@@ -134,12 +134,15 @@ def dbscan_path(curve: str, label_name: str) -> str:
     return f"{PLOT_DBSCAN}/{curve}/{path_part(label_name)}"
 
 
-def annotation_context() -> rr.AnnotationContext:
-    """Return the label table of RECORDING.md with its fixed colours."""
+def annotation_context(*, unlabelled_alpha: int = 255) -> rr.AnnotationContext:
+    """Return the label table of RECORDING.md with its fixed colours (label 0 at an alpha)."""
+    alphas = [unlabelled_alpha] + [255] * (len(LABEL_NAMES) - 1)
     return rr.AnnotationContext(
         [
-            rr.AnnotationInfo(id=i, label=name, color=color)
-            for i, (name, color) in enumerate(zip(LABEL_NAMES, LABEL_COLORS, strict=True))
+            rr.AnnotationInfo(id=i, label=name, color=(*color, alpha))
+            for i, (name, color, alpha) in enumerate(
+                zip(LABEL_NAMES, LABEL_COLORS, alphas, strict=True)
+            )
         ]
     )
 
@@ -202,7 +205,7 @@ def _plot_views() -> rrb.Tabs:
         row_shares=[3, 1],
         name="Tracking",
     )
-    dbscan = rrb.Vertical(
+    dbscan = rrb.Horizontal(
         *(
             rrb.TimeSeriesView(name=f"DBSCAN {curve} over K", origin=f"{PLOT_DBSCAN}/{curve}")
             for curve in PLOT_DBSCAN_CURVES

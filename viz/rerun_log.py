@@ -255,11 +255,14 @@ class RerunLogger:
         self._rec.save(rrd_path, default_blueprint=layout.blueprint())
         self._rec.send_recording_name(recording_name)
         self._rec.log("/", layout.annotation_context(), static=True)
+        overlay = layout.annotation_context(unlabelled_alpha=0)  # see the image through label 0
+        self._rec.log(layout.SEGMENTATION, overlay, static=True)
         self._rec.log(layout.WORLD, rr.ViewCoordinates.RDF, static=True)
         self._calibrated = False
+        self._camera: rr.Transform3D | None = None
         self._status: str | None = None
         self._styled: set[str] = set()
-        self._frame_of_stamp: dict[int, int] = {}
+        self._frame_of_stamp: dict[int, int] = {}  # 16 bytes a frame: kept for log_trajectory
         self._closed = False
 
     def __enter__(self) -> RerunLogger:
@@ -280,10 +283,14 @@ class RerunLogger:
         self._frame_of_stamp[stamp_ns] = index
 
     def set_stage(self, step: int) -> None:
-        """Set the `stage` timeline (layout.STAGE_*) for what follows."""
+        """Set the `stage` timeline (layout.STAGE_*); clear the refine points of earlier steps."""
         if not layout.STAGE_FUSED <= step <= layout.STAGE_FINAL:
             raise ValueError(f"expected a stage step in 0..{layout.STAGE_FINAL}, found {step}")
         self._rec.set_time(layout.TIMELINE_STAGE, sequence=step)
+        # Each step shows only its own points under /world/refine, not the steps before it.
+        self._rec.log(layout.REFINE, rr.Clear(recursive=True))
+        if self._camera is not None:  # the camera stays where the last frame left it
+            self._rec.log(layout.CAMERA, self._camera)
 
     def log_calibration(self, color_intrinsics: Intrinsics) -> None:
         """Log the colour camera's pinhole, once, static."""
@@ -314,7 +321,8 @@ class RerunLogger:
         m = np.asarray(world_from_camera, dtype=np.float64)
         if m.shape != (4, 4):
             raise ValueError(f"expected world_from_camera of shape (4, 4), found {m.shape}")
-        self._rec.log(layout.CAMERA, rr.Transform3D(translation=m[:3, 3], mat3x3=m[:3, :3]))
+        self._camera = rr.Transform3D(translation=m[:3, 3], mat3x3=m[:3, :3])
+        self._rec.log(layout.CAMERA, self._camera)
         position = m[None, :3, 3]
         trail = rr.Points3D(position, colors=layout.TRACKED_RGB, radii=_POINT_RADIUS)
         self._rec.log(layout.TRAJECTORY_TRACKED, trail)
@@ -393,9 +401,11 @@ class RerunLogger:
         colors: npt.NDArray[np.uint8] | None = None,
         labels: IntArray | None = None,
     ) -> None:
-        """Log a point map in label colours; its RGB colours go to `<map>/rgb`, hidden at first."""
+        """Log a map in label colours, RGB ones at `<map>/rgb`; a refined map replaces the fused."""
         path = _path_of(kind, layout.MAP_KINDS, "map")
         xyz = _points(points, "points")
+        if kind == "refined":  # the same places, relabelled: hide the fused map from now on
+            self._rec.log(layout.MAP_FUSED, rr.Clear(recursive=True))
         if labels is None:
             self._rec.log(path, rr.Points3D(xyz, colors=colors, radii=_POINT_RADIUS))
             return

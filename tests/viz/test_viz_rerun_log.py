@@ -158,7 +158,9 @@ def test_map_of_300k_points_keeps_labels_and_rgb_apart(tmp_path: Path) -> None:
     np.testing.assert_array_equal(rgb >> 24, colors[:, 0])
     assert "Points3D:colors" not in contents.columns[layout.MAP_FUSED]
     assert f"{layout.MAP_REFINED}/rgb" not in contents.entities()
-    assert list(contents.values(layout.MAP_FUSED, layout.TIMELINE_STAGE)) == [0]
+    assert list(contents.values(layout.MAP_FUSED, layout.TIMELINE_STAGE)) == [0, 0]
+    # the refined map replaces the fused one: a recursive clear, logged after the fused points
+    assert list(contents.values(layout.MAP_FUSED, "Clear:is_recursive")) == [True]
 
 
 def test_refine_step_colours_points_by_cluster_on_the_stage_timeline(tmp_path: Path) -> None:
@@ -175,6 +177,34 @@ def test_refine_step_colours_points_by_cluster_on_the_stage_timeline(tmp_path: P
     assert len({colors[0], colors[1], colors[3], colors[4]}) == 4
     assert list(contents.values(path, "Points3D:class_ids")) == [5] * 6
     assert list(contents.values(path, layout.TIMELINE_STAGE)) == [layout.STAGE_DBSCAN]
+
+
+def test_each_stage_clears_the_refine_points_of_earlier_steps_and_keeps_the_camera(
+    tmp_path: Path,
+) -> None:
+    pose = np.eye(4)
+    pose[:3, 3] = [1.0, 2.0, 3.0]
+    with RerunLogger(tmp_path / "st.rrd", recording_name="st") as log:
+        log.set_frame(0, stamp_ns=1)
+        log.log_pose(pose, keyframe=True)
+        for step in (layout.STAGE_PLANES, layout.STAGE_SOR):
+            log.set_stage(step)
+            log.log_refine("planes" if step == layout.STAGE_PLANES else "outliers", np.ones((4, 3)))
+    contents = read_rrd(tmp_path / "st.rrd")
+    assert list(contents.values(layout.REFINE, layout.TIMELINE_STAGE)) == [1, 2]
+    assert list(contents.values(layout.REFINE, "Clear:is_recursive")) == [True, True]
+    assert list(contents.values(layout.CAMERA, layout.TIMELINE_STAGE)) == [1, 2]
+    translation = contents.values(layout.CAMERA, "Transform3D:translation").reshape(-1, 3)
+    np.testing.assert_allclose(translation, [[1, 2, 3]] * 3)
+
+
+def test_segmentation_overlay_shows_the_image_through_label_zero(tmp_path: Path) -> None:
+    RerunLogger(tmp_path / "o.rrd", recording_name="o").close()
+    contents = read_rrd(tmp_path / "o.rrd")
+    ((context,),) = contents.column(layout.SEGMENTATION, "AnnotationContext:context")
+    colours = [c["class_description"]["info"]["color"] for c in context]
+    assert colours[0] & 0xFF == 0  # alpha of 'unlabelled'
+    assert all(c & 0xFF == 255 for c in colours[1:])
 
 
 def test_dbscan_curves_lie_on_the_k_timeline_only_with_the_chosen_k_marked(tmp_path: Path) -> None:
