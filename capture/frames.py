@@ -82,9 +82,7 @@ class Extrinsics:
     color_from_depth: npt.NDArray[np.float64]  # (4, 4), metres
 
     @staticmethod
-    def from_librealsense(
-        rotation: npt.ArrayLike, translation: npt.ArrayLike
-    ) -> Extrinsics:
+    def from_librealsense(rotation: npt.ArrayLike, translation: npt.ArrayLike) -> Extrinsics:
         """Build from librealsense's column-major rotation[9] and translation[3] in metres."""
         m = np.eye(4)
         m[:3, :3] = np.asarray(rotation, dtype=np.float64).reshape(3, 3).T

@@ -109,3 +109,50 @@ def stamp(stamp_ns: int) -> dict[str, int]:
 def stamp_ns_of(msg_stamp: object) -> int:
     """Return the nanoseconds of a decoded builtin_interfaces/Time."""
     return int(getattr(msg_stamp, "sec")) * 1_000_000_000 + int(getattr(msg_stamp, "nanosec"))  # noqa: B009
+
+
+def header(stamp_ns: int, frame_id: str) -> dict[str, object]:
+    """Return a std_msgs/Header dict."""
+    return {"stamp": stamp(stamp_ns), "frame_id": frame_id}
+
+
+def image(
+    stamp_ns: int, frame_id: str, *, width: int, height: int, encoding: str, step: int, data: bytes
+) -> dict[str, object]:
+    """Return a little-endian sensor_msgs/Image dict."""
+    return {
+        "header": header(stamp_ns, frame_id),
+        "height": height,
+        "width": width,
+        "encoding": encoding,
+        "is_bigendian": 0,
+        "step": step,
+        "data": data,
+    }
+
+
+def camera_info(
+    stamp_ns: int,
+    frame_id: str,
+    *,
+    width: int,
+    height: int,
+    k: tuple[float, float, float, float],
+    distortion_model: str,
+    coeffs: tuple[float, ...],
+) -> dict[str, object]:
+    """Return a sensor_msgs/CameraInfo dict for a pinhole camera with k = (fx, fy, cx, cy)."""
+    fx, fy, cx, cy = k
+    return {
+        "header": header(stamp_ns, frame_id),
+        "height": height,
+        "width": width,
+        "distortion_model": distortion_model,
+        "d": list(coeffs),
+        "k": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        "r": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        "p": [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+        "binning_x": 0,
+        "binning_y": 0,
+        "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+    }
