@@ -279,13 +279,26 @@ def test_bad_arguments_raise_one_line_value_errors(tmp_path: Path, call, match: 
     assert "\n" not in str(info.value)
 
 
+def test_empty_inputs_of_a_lost_frame_are_logged_and_verify(tmp_path: Path) -> None:
+    with RerunLogger(tmp_path / "e.rrd", recording_name="e") as log:
+        log.set_frame(0, stamp_ns=5)
+        log.log_keypoints(np.zeros((0, 2)), inliers=np.zeros(0, bool), matched_xy=np.zeros((0, 2)))
+        log.log_trajectory("estimated", np.zeros(0, np.int64), np.zeros((0, 3)))
+        log.log_map("fused", np.zeros((0, 3)), labels=np.zeros(0, np.uint8))
+    contents = read_rrd(tmp_path / "e.rrd")
+    assert contents.rows[(layout.KEYPOINTS, layout.TIMELINE_FRAME)] == 1
+    assert contents.values(layout.KEYPOINTS, "Points2D:positions").size == 0
+    assert rerun_verify(tmp_path / "e.rrd").returncode == 0
+
+
 def test_close_is_idempotent_and_both_loggers_are_loggers(tmp_path: Path) -> None:
-    log = RerunLogger(tmp_path / "c.rrd", recording_name="c")
+    log: Logger = RerunLogger(tmp_path / "c.rrd", recording_name="c")  # mypy checks the protocol
     assert isinstance(log, Logger)
     log.close()
     log.close()
     assert read_rrd(tmp_path / "c.rrd").static["/"] == 1
-    assert isinstance(NullLogger(), Logger)
+    null: Logger = NullLogger()
+    assert isinstance(null, Logger)
 
 
 def test_null_logger_does_nothing_and_costs_nothing(recording: Path, tmp_path: Path) -> None:
