@@ -67,15 +67,16 @@ class D435DepthModel:
     def add_noise(
         self, depth_m: npt.NDArray[np.float32], *, focal_px: float, rng: np.random.Generator
     ) -> npt.NDArray[np.float32]:
-        """Return depth with the disparity error drawn; 0 (no depth) stays 0."""
-        fb = np.float32(focal_px * self.baseline_m)
-        valid = depth_m > 0
-        disparity = np.where(valid, fb / np.where(valid, depth_m, 1.0), 0.0).astype(np.float32)
-        disparity += rng.standard_normal(depth_m.shape, dtype=np.float32) * np.float32(
-            self.subpixel
-        )
-        noisy = np.where(valid & (disparity > 0), fb / np.maximum(disparity, 1e-6), 0.0)
-        return noisy.astype(np.float32)
+        """Return depth with the disparity error drawn; 0 (no depth) stays 0.
+
+        With disparity d = fB / z and an error e: z' = fB / (d + e) = z / (1 + e z / fB).
+        """
+        scale = rng.standard_normal(depth_m.shape, dtype=np.float32)
+        scale *= np.float32(self.subpixel / (focal_px * self.baseline_m))
+        scale *= depth_m
+        scale += np.float32(1.0)
+        np.maximum(scale, np.float32(1e-3), out=scale)  # a disparity below zero: far, not negative
+        return np.asarray(depth_m / scale, np.float32)
 
     def invalid_mask(
         self, view: DepthView, *, focal_px: float, rng: np.random.Generator

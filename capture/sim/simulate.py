@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import logging
 import time
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
@@ -63,19 +64,40 @@ class FrameSimulator:
         self._color_noise = ColorSensorNoise(
             np.random.default_rng([seed, 12]), size=width * height * 3
         )
-        self._pool = ThreadPoolExecutor(max_workers=1)
+        self._pool = ThreadPoolExecutor(max_workers=2)
 
     def render(self, world_from_color: npt.NDArray[np.float64]) -> SimFrame:
         """Render one frame; the depth camera pose follows from the rig's extrinsics."""
-        # Cast the depth camera on a worker while this thread shades colour (Embree frees the GIL).
+        return next(self.frames(world_from_color[None]))
+
+    def frames(self, world_from_color: npt.NDArray[np.float64]) -> Iterator[SimFrame]:
+        """Yield the frames of poses (N, 4, 4) in order, rendering the next while one is used.
+
+        Two workers ray-cast and shade the colour and the depth camera of the next frame while
+        the caller handles this one (Embree and most of numpy release the GIL), so the two cores
+        stay busy. The noise is drawn here, in order, so results do not depend on the timing.
+        """
+        pending = self._submit(world_from_color[0]) if len(world_from_color) else None
+        for index in range(len(world_from_color)):
+            assert pending is not None
+            color_job, depth_job = pending
+            more = index + 1 < len(world_from_color)
+            pending = self._submit(world_from_color[index + 1]) if more else None
+            yield self._finish(color_job.result(), depth_job.result())
+
+    def _submit(
+        self, world_from_color: npt.NDArray[np.float64]
+    ) -> tuple[Future[ColorView], Future[DepthView]]:
         world_from_depth = world_from_color @ self._depth_from_color
-        depth_job = self._pool.submit(self.renderer.render_depth, world_from_depth, self.rig.depth)
-        view = self.renderer.render_color(world_from_color, self.rig.color)
-        noisy = ColorView(
-            self._color_noise.apply(view.color), view.labels, view.instances, view.depth_m
+        return (
+            self._pool.submit(self.renderer.render_color, world_from_color, self.rig.color),
+            self._pool.submit(self.renderer.render_depth, world_from_depth, self.rig.depth),
         )
-        depth_view = depth_job.result()
+
+    def _finish(self, view: ColorView, depth_view: DepthView) -> SimFrame:
+        color = self._color_noise.apply(view.color)
         depth_mm = self.depth_model.apply(depth_view, focal_px=self.rig.depth.fx, rng=self._rng)
+        noisy = ColorView(color, view.labels, view.instances, view.depth_m)
         return SimFrame(noisy, depth_mm, depth_view)
 
     def close(self) -> None:
@@ -123,11 +145,10 @@ def simulate_recording(
                 media_type="application/x-ply",
                 log_ns=stamps[0],
             )
-            for index, (stamp_ns, pose) in enumerate(
-                zip(stamps, trajectory.world_from_camera, strict=True)
-            ):
+            poses = trajectory.world_from_camera
+            for index, frame in enumerate(sim.frames(poses)):
                 _write_frame(
-                    writer, sim, sim.render(pose), index=index, stamp_ns=stamp_ns, pose=pose
+                    writer, sim, frame, index=index, stamp_ns=stamps[index], pose=poses[index]
                 )
             writer.finish(_capture_summary(config, frames, stamps[0]))
     finally:

@@ -105,10 +105,10 @@ def handheld_loop(
     position = np.column_stack([xy, eye]) + 0.004 * _shake(rng, t_s, 3)
     # Look inwards with a slow sway, periodic over the recording (the end looks like the start).
     cycles = max(1, round(duration_s / 8.0))
-    yaw = np.arctan2(inward[:, 1], inward[:, 0]) + rng.uniform(0.3, 0.5) * np.sin(
+    yaw = np.arctan2(inward[:, 1], inward[:, 0]) + rng.uniform(0.5, 0.8) * np.sin(
         cycles * phase + rng.uniform(0, 2 * np.pi)
     )
-    pitch = -rng.uniform(0.2, 0.35) + 0.08 * np.sin(cycles * phase + rng.uniform(0, 2 * np.pi))
+    pitch = -rng.uniform(0.15, 0.3) + 0.08 * np.sin(cycles * phase + rng.uniform(0, 2 * np.pi))
     forward = np.column_stack(
         [np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)]
     )

@@ -15,7 +15,10 @@ from helpers_sim import (
 )
 
 from capture.frames import Intrinsics
-from capture.sim import FrameSimulator, Renderer, build_scene, d435_rig
+from capture.sim import FrameSimulator, Renderer, Scene, build_scene, d435_rig
+from capture.sim.placement import PlacedPart
+from capture.sim.shapes import plane_grid
+from capture.sim.textures import Material
 from capture.sim.trajectory import handheld_loop, look_rotation
 
 
@@ -109,3 +112,13 @@ def test_textures_give_orb_corners() -> None:
     gray = cv2.cvtColor(view.color, cv2.COLOR_RGB2GRAY)
     keypoints = cv2.ORB.create(nfeatures=1000).detect(gray, None)
     assert len(keypoints) >= 500
+
+
+def test_bright_white_surfaces_saturate_instead_of_wrapping() -> None:
+    white = Material("noise", (1.0, 1.0, 1.0), contrast=0.0)
+    plane = plane_grid((-1.0, -1.0, 1.0), (0.0, 2.0, 0.0), (2.0, 0.0, 0.0), cell_m=0.05)
+    scene = scene_of([PlacedPart(plane, white, 3, 1)])
+    lit = Scene(0, scene.room_m, scene.parts, scene.instance_names, np.zeros((1, 3)), scene.path)
+    color = Renderer(lit).render_color(np.eye(4), SMALL_K).color
+    # Ambient 0.45 + Lambert 0.6 > 1 head-on: clipped to white, never wrapped around to dark.
+    assert color[20:40, 30:50].min() >= 250
