@@ -194,10 +194,12 @@ class ThreadedWriter:
         self, raw: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]
     ) -> npt.NDArray[np.uint16]:
         """Return depth in millimetres; RECORDING.md converts other units at capture."""
-        if abs(self.depth_scale_m - 0.001) < 1e-9:
+        units_um = round(self.depth_scale_m * 1e6)  # D400 depth units are whole micrometres
+        if units_um == 1000:
             return np.asarray(raw, dtype=np.uint16)
-        mm = np.rint(raw.astype(np.float64) * (self.depth_scale_m * 1000.0))
-        return np.clip(mm, 0, 65535).astype(np.uint16)
+        # Integer arithmetic, rounding half up: float products tie-break inconsistently.
+        mm = (raw.astype(np.uint64) * units_um + 500) // 1000
+        return np.minimum(mm, 65535).astype(np.uint16)
 
     def summary(self, stats: CaptureStats) -> dict[str, object]:
         """Return the end-of-capture part of the `capture` metadata record."""

@@ -68,10 +68,12 @@ class RecordingWriter:
         chunk_size_bytes: int = 64 * 1024 * 1024,
         color_jpeg: bool = False,
         jpeg_quality: int = 90,
+        stream: IO[bytes] | None = None,
     ) -> None:
+        """Create the file at `path` (or write to `stream`, then `path` only names it)."""
         if compression not in COMPRESSIONS:
             raise RecordingError(
-                f"unknown compression {compression!r}; expected one of {list(COMPRESSIONS)}"
+                f"unknown compression {compression!r}; expected one of {list(COMPRESSIONS)}: {path}"
             )
         self.path = Path(path)
         self.namespace = namespace.rstrip("/")
@@ -79,7 +81,7 @@ class RecordingWriter:
         self.jpeg_quality = jpeg_quality
         self._interval_ns = int(chunk_interval_s * 1e9)
         try:
-            self._stream: IO[bytes] = self.path.open("wb")
+            self._stream: IO[bytes] = self.path.open("wb") if stream is None else stream
         except OSError as err:
             raise RecordingError(f"cannot create recording: {err.strerror}: {self.path}") from err
         self._mcap = McapChunkWriter(
@@ -128,6 +130,9 @@ class RecordingWriter:
             raise RecordingError(f"recording already finished; cannot write {topic}: {self.path}")
         channel_id, encoder = self._channel(topic, datatype)
         data = encoder(msg)
+        first = self._chunk_first_log_ns
+        if first is not None and log_ns - first >= self._interval_ns:
+            self.flush()  # so that a chunk never spans the interval of recording time
         seq = self._sequence.get(topic, 0)
         self._sequence[topic] = seq + 1
         self._guard(
@@ -139,10 +144,7 @@ class RecordingWriter:
         self.bytes_written += len(data)
         if self._chunk_first_log_ns is None:
             self._chunk_first_log_ns = log_ns
-        if log_ns - self._chunk_first_log_ns >= self._interval_ns:
-            self.flush()
-        else:
-            self.flush_if_due()
+        self.flush_if_due()
 
     def flush_if_due(self) -> None:
         """Close the open chunk if it has been open for the chunk interval of wall time."""
@@ -210,7 +212,9 @@ class RecordingWriter:
         """Write a colour image (H, W, 3) RGB with its camera_info (and metadata)."""
         log = stamp_ns if log_ns is None else log_ns
         if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
-            raise RecordingError(f"colour must be (H, W, 3) uint8, got {color.shape} {color.dtype}")
+            raise RecordingError(
+                f"colour must be (H, W, 3) uint8, got {color.shape} {color.dtype}: {self.path}"
+            )
         if self.color_jpeg:
             topic, datatype, msg = self._jpeg_message(color, stamp_ns)
         else:
@@ -240,7 +244,9 @@ class RecordingWriter:
         bgr = cv2.cvtColor(color, cv2.COLOR_RGB2BGR)
         ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if not ok:
-            raise RecordingError(f"JPEG encoding of a {color.shape} colour frame failed")
+            raise RecordingError(
+                f"JPEG encoding of a {color.shape} colour frame failed: {self.path}"
+            )
         msg: dict[str, object] = {
             "header": m.header(stamp_ns, m.COLOR_FRAME_ID),
             "format": "rgb8; jpeg compressed bgr8",
@@ -262,7 +268,8 @@ class RecordingWriter:
         log = stamp_ns if log_ns is None else log_ns
         if depth_mm.ndim != 2 or depth_mm.dtype != np.uint16:
             raise RecordingError(
-                f"depth must be (H, W) uint16 mm, got {depth_mm.shape} {depth_mm.dtype}"
+                f"depth must be (H, W) uint16 mm, got {depth_mm.shape} {depth_mm.dtype}: "
+                f"{self.path}"
             )
         h, w = depth_mm.shape
         image_topic, info_topic, frame_id = (

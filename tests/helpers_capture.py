@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pyrealsense2 as rs
+from scipy.spatial.transform import Rotation
 
 from capture.frames import Extrinsics, Intrinsics
 
@@ -26,10 +27,9 @@ DEPTH_W, DEPTH_H = 80, 60
 COLOR_K = (90.5, 91.25, 47.75, 35.5)  # fx fy cx cy, exact in float32
 DEPTH_K = (70.0, 70.5, 40.25, 29.75)
 COLOR_COEFFS = (0.125, -0.25, 0.0009765625, -0.001953125, 0.0625)  # exact in float32
-# A rotation about an axis that makes the matrix non-symmetric (so a transpose would show).
-ROTATION = np.array(
-    [[0.9998, -0.0175, 0.0087], [0.0174, 0.9998, 0.0052], [-0.0088, -0.0050, 0.9999]]
-)
+# 2 degrees about a skew axis: a non-symmetric rotation, so a transposed matrix would show.
+_AXIS = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+ROTATION = Rotation.from_rotvec(_AXIS * np.deg2rad(2.0)).as_matrix()
 TRANSLATION = (0.015, -0.0002, 0.0004)
 STAMP0_MS = 1_700_000_000_000.0  # global time (epoch ms) of frame 0
 ROOT = Path(__file__).resolve().parents[1]
