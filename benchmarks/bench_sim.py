@@ -21,7 +21,7 @@ import numpy as np
 import open3d as o3d
 
 from benchmarks.common import Row
-from capture.sim import FrameSimulator, handheld_loop, simulate_recording
+from capture.sim import FrameSimulator, d435_rig, handheld_loop, simulate_recording
 from capture.sim.noise import D435DepthModel
 from capture.sim.placement import LoopPath, PlacedPart
 from capture.sim.render import DepthView, Renderer
@@ -37,8 +37,7 @@ CAMERA_FPS = 30.0
 
 def _render_fps() -> tuple[float, float, float]:
     """Return (wall frames/s, frames/s two cores give by CPU time, ms of bare ray casts)."""
-    sim = FrameSimulator(1)
-    try:
+    with FrameSimulator(1) as sim:
         poses = handheld_loop(sim.scene, frames=FRAMES, fps=30.0, seed=1).world_from_camera
         next(sim.frames(poses[:1]))  # warm up: BVH build, caches
         wall, cpu = time.perf_counter(), time.process_time()
@@ -46,8 +45,6 @@ def _render_fps() -> tuple[float, float, float]:
         wall_fps = count / (time.perf_counter() - wall)
         cpu_fps = 2.0 * count / (time.process_time() - cpu)
         cast_ms = _bare_casts_ms(sim, poses[::6])
-    finally:
-        sim.close()
     return wall_fps, cpu_fps, cast_ms
 
 
@@ -93,15 +90,12 @@ def _noise_spread_mm(depth_m: float) -> tuple[float, float]:
     part = PlacedPart(wall, Material("noise", (0.6, 0.6, 0.6)), 3, 1)
     lights = np.array([[0.0, 0.0, 0.0]])
     scene = Scene(0, (40.0, 40.0, 40.0), (part,), {1: "wall"}, lights, LoopPath((0, 0), (1, 1)))
-    sim = FrameSimulator(0)
-    try:
-        view: DepthView = Renderer(scene).render_depth(np.eye(4), sim.rig.depth)
-    finally:
-        sim.close()
+    rig = d435_rig()
+    view: DepthView = Renderer(scene).render_depth(np.eye(4), rig.depth)
     model = D435DepthModel()
-    depth_mm = model.apply(view, focal_px=sim.rig.depth.fx, rng=np.random.default_rng(0))
+    depth_mm = model.apply(view, focal_px=rig.depth.fx, rng=np.random.default_rng(0))
     valid = depth_mm[depth_mm > 0].astype(np.float64)
-    formula = float(model.rms_error_m(depth_m, focal_px=sim.rig.depth.fx)) * 1000.0
+    formula = float(model.rms_error_m(depth_m, focal_px=rig.depth.fx)) * 1000.0
     return float(np.std(valid)), formula
 
 

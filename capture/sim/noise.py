@@ -48,7 +48,7 @@ class D435DepthModel:
     edge_jump: float = 0.05  # relative depth jump in a 3x3 window that invalidates a pixel
     dark_luminance: float = 0.12  # albedo below which the IR pattern is lost...
     dark_dropout: float = 0.5  # ...for this fraction of the pixels
-    specular_cos: float = 0.985  # glossy surfaces seen within ~10 degrees of head-on
+    specular_cos: float = 0.996  # glossy surfaces seen within ~5 degrees of head-on
     grazing_cos: float = 0.1  # surfaces seen at more than ~84 degrees
 
     def __post_init__(self) -> None:

@@ -101,8 +101,14 @@ class FrameSimulator:
         return SimFrame(noisy, depth_mm, depth_view)
 
     def close(self) -> None:
-        """Stop the worker thread."""
+        """Stop the worker threads."""
         self._pool.shutdown()
+
+    def __enter__(self) -> FrameSimulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def simulate_recording(
@@ -122,7 +128,17 @@ def simulate_recording(
             f"fps={fps}, {width}x{height}: {path}"
         )
     started = time.perf_counter()
-    sim = FrameSimulator(seed, width=width, height=height)
+    with FrameSimulator(seed, width=width, height=height) as sim:
+        cloud = _write(path, sim, seed=seed, frames=frames, fps=fps, compression=compression)
+    seconds = time.perf_counter() - started
+    logger.info("simulated %d frames of seed %d in %.1f s: %s", frames, seed, seconds, path)
+    return SimSummary(Path(path), seed, frames, fps, frames / fps, seconds, cloud)
+
+
+def _write(
+    path: Path, sim: FrameSimulator, *, seed: int, frames: int, fps: float, compression: str
+) -> int:
+    """Write the recording; return the number of ground-truth cloud points."""
     trajectory = handheld_loop(sim.scene, frames=frames, fps=fps, seed=seed)
     stamps = [int(s) for s in trajectory.stamps_ns]
     cloud = sample_scene(sim.scene, sim.renderer, spacing_m=GT_CLOUD_SPACING_M, seed=seed)
@@ -130,32 +146,22 @@ def simulate_recording(
         "seed": seed,
         "frames": frames,
         "fps": fps,
-        "width": width,
-        "height": height,
+        "width": sim.rig.color.width,
+        "height": sim.rig.color.height,
         "compression": compression,
         "gt_cloud_spacing_m": GT_CLOUD_SPACING_M,
     }
-    try:
-        with RecordingWriter(path, compression=compression) as writer:
-            writer.write_metadata("device", _device(seed))
-            writer.write_calibration(sim.rig.depth_to_color, stamp_ns=stamps[0])
-            writer.write_attachment(
-                GT_CLOUD_ATTACHMENT,
-                ply_bytes(cloud),
-                media_type="application/x-ply",
-                log_ns=stamps[0],
-            )
-            poses = trajectory.world_from_camera
-            for index, frame in enumerate(sim.frames(poses)):
-                _write_frame(
-                    writer, sim, frame, index=index, stamp_ns=stamps[index], pose=poses[index]
-                )
-            writer.finish(_capture_summary(config, frames, stamps[0]))
-    finally:
-        sim.close()
-    seconds = time.perf_counter() - started
-    logger.info("simulated %d frames of seed %d in %.1f s: %s", frames, seed, seconds, path)
-    return SimSummary(Path(path), seed, frames, fps, frames / fps, seconds, len(cloud.labels))
+    with RecordingWriter(path, compression=compression) as writer:
+        writer.write_metadata("device", _device(seed))
+        writer.write_calibration(sim.rig.depth_to_color, stamp_ns=stamps[0])
+        writer.write_attachment(
+            GT_CLOUD_ATTACHMENT, ply_bytes(cloud), media_type="application/x-ply", log_ns=stamps[0]
+        )
+        poses = trajectory.world_from_camera
+        for index, frame in enumerate(sim.frames(poses)):
+            _write_frame(writer, sim, frame, index=index, stamp_ns=stamps[index], pose=poses[index])
+        writer.finish(_capture_summary(config, frames, stamps[0]))
+    return len(cloud.labels)
 
 
 def _write_frame(

@@ -75,8 +75,7 @@ def test_label_image_agrees_with_instances_in_a_furnished_room() -> None:
 
 @pytest.mark.parametrize("camera", ["color", "depth"])
 def test_backprojected_depth_lands_on_the_mesh(camera: str) -> None:
-    sim = FrameSimulator(6, width=160, height=120)
-    try:
+    with FrameSimulator(6, width=160, height=120) as sim:
         pose = handheld_loop(sim.scene, frames=30, fps=30.0, seed=6).world_from_camera[17]
         if camera == "color":
             k, world_from_camera = sim.rig.color, pose
@@ -87,8 +86,6 @@ def test_backprojected_depth_lands_on_the_mesh(camera: str) -> None:
             depth = sim.renderer.render_depth(world_from_camera, k).depth_m
         points = transform(world_from_camera, backproject(depth, k))
         distance = mesh_distance([p.mesh for p in sim.scene.parts], points)
-    finally:
-        sim.close()
     assert len(points) == k.width * k.height
     assert float(np.max(distance)) < 1e-4
 
