@@ -61,7 +61,7 @@ def _bare_casts_ms(sim: FrameSimulator, poses: np.ndarray) -> float:
         rays = []
         for k, world_from_camera in (
             (sim.rig.color, pose),
-            (sim.rig.depth, pose @ np.linalg.inv(sim.rig.depth_to_color.color_from_depth)),
+            (sim.rig.depth, pose @ sim.rig.depth_to_color.color_from_depth),
         ):
             rays.append(
                 o3d.t.geometry.RaycastingScene.create_rays_pinhole(

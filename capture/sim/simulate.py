@@ -59,7 +59,7 @@ class FrameSimulator:
         self.renderer = Renderer(self.scene)
         self.rig: CameraRig = d435_rig(width, height)
         self.depth_model = D435DepthModel()
-        self._depth_from_color = np.linalg.inv(self.rig.depth_to_color.color_from_depth)
+        self._color_from_depth = self.rig.depth_to_color.color_from_depth
         self._rng = np.random.default_rng([seed, 11])
         self._color_noise = ColorSensorNoise(
             np.random.default_rng([seed, 12]), size=width * height * 3
@@ -88,7 +88,7 @@ class FrameSimulator:
     def _submit(
         self, world_from_color: npt.NDArray[np.float64]
     ) -> tuple[Future[ColorView], Future[DepthView]]:
-        world_from_depth = world_from_color @ self._depth_from_color
+        world_from_depth = world_from_color @ self._color_from_depth
         return (
             self._pool.submit(self.renderer.render_color, world_from_color, self.rig.color),
             self._pool.submit(self.renderer.render_depth, world_from_depth, self.rig.depth),
