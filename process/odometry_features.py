@@ -1,0 +1,277 @@
+"""The sparse half of the visual odometry: ORB features with depth, matching, PnP RANSAC."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Intrinsics
+
+THUMB_SIZE = (32, 24)  # (w, h) of the keyframe thumbnails used for place recognition
+
+
+@dataclass(frozen=True, slots=True)
+class Features:
+    """ORB features of one image, with 3-D points where the depth is usable."""
+
+    xy: npt.NDArray[np.float32]  # (N, 2) pixels
+    descriptors: npt.NDArray[np.uint8]  # (N, 32)
+    points: npt.NDArray[np.float32]  # (N, 3) camera frame, NaN where depth is unusable
+
+    @property
+    def has_depth(self) -> npt.NDArray[np.bool_]:
+        """Return which features have a 3-D point."""
+        return np.isfinite(self.points[:, 2])
+
+
+@dataclass(slots=True)
+class Keyframe:
+    """What the odometry keeps of a keyframe: features with depth, a thumbnail, its links."""
+
+    id: int
+    frame_index: int
+    stamp_ns: int
+    segment: int
+    xy: npt.NDArray[np.float32]  # (M, 2) features that have depth
+    descriptors: npt.NDArray[np.uint8]  # (M, 32)
+    points: npt.NDArray[np.float32]  # (M, 3) keyframe camera frame
+    thumbnail: npt.NDArray[np.float32]  # (24 * 32,) zero mean, unit norm
+    dense: Any = field(default=None)  # downsampled RGB-D for dense alignment, reference only
+
+
+@dataclass(frozen=True, slots=True)
+class PnpResult:
+    """A pose from 3-D/2-D matches: the reference's points seen by the current camera."""
+
+    camera_from_reference: npt.NDArray[np.float64]  # (4, 4)
+    inliers: npt.NDArray[np.int64]  # indices into the matches given
+    rms_px: float
+
+    @property
+    def reference_from_camera(self) -> npt.NDArray[np.float64]:
+        """Return the inverse pose: the current camera in the reference frame."""
+        return rigid_inverse(self.camera_from_reference)
+
+
+class FeatureExtractor:
+    """Detect ORB features and lift them to 3-D with the registered depth."""
+
+    def __init__(
+        self,
+        intrinsics: Intrinsics,
+        *,
+        n_features: int,
+        scale_factor: float,
+        levels: int,
+        fast_threshold: int,
+        min_depth_m: float,
+        max_depth_m: float,
+    ) -> None:
+        self.intrinsics = intrinsics
+        self.orb = cv2.ORB.create(
+            nfeatures=n_features,
+            scaleFactor=scale_factor,
+            nlevels=levels,
+            fastThreshold=fast_threshold,
+        )
+        self.min_depth_m = min_depth_m
+        self.max_depth_m = max_depth_m
+        self.camera_matrix = intrinsics.matrix
+        self.dist = np.asarray(intrinsics.coeffs, np.float64) if intrinsics.is_distorted else None
+
+    def detect(
+        self, gray: npt.NDArray[np.uint8]
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+        """Return keypoint positions (N, 2) and ORB descriptors (N, 32)."""
+        keypoints, descriptors = self.orb.detectAndCompute(gray, None)
+        if descriptors is None or not keypoints:
+            return np.zeros((0, 2), np.float32), np.zeros((0, 32), np.uint8)
+        xy = np.array([k.pt for k in keypoints], np.float32).reshape(-1, 2)
+        return xy, np.asarray(descriptors, np.uint8)
+
+    def lift(
+        self,
+        xy: npt.NDArray[np.float32],
+        depth_m: npt.NDArray[np.float32],
+    ) -> npt.NDArray[np.float32]:
+        """Return the 3-D point (camera frame) of each pixel, NaN where the depth is unusable.
+
+        Depth is interpolated bilinearly at the sub-pixel keypoint, and only where its 3x3
+        neighbourhood is complete and smooth: a corner on a depth edge has no single depth.
+        """
+        out = np.full((len(xy), 3), np.nan, np.float32)
+        if len(xy) == 0:
+            return out
+        h, w = depth_m.shape
+        x0 = np.clip(np.floor(xy[:, 0]).astype(np.int64), 1, w - 3)
+        y0 = np.clip(np.floor(xy[:, 1]).astype(np.int64), 1, h - 3)
+        fx = np.clip(xy[:, 0] - x0, 0.0, 1.0)
+        fy = np.clip(xy[:, 1] - y0, 0.0, 1.0)
+        patch = np.stack(
+            [depth_m[y0 + dy, x0 + dx] for dy in (-1, 0, 1, 2) for dx in (-1, 0, 1, 2)], axis=1
+        )  # (N, 16), 4x4 neighbourhood around the sample
+        lo, hi = patch.min(axis=1), patch.max(axis=1)
+        d00, d01 = depth_m[y0, x0], depth_m[y0, x0 + 1]
+        d10, d11 = depth_m[y0 + 1, x0], depth_m[y0 + 1, x0 + 1]
+        z = (d00 * (1 - fx) + d01 * fx) * (1 - fy) + (d10 * (1 - fx) + d11 * fx) * fy
+        ok = (lo >= self.min_depth_m) & (hi <= self.max_depth_m) & (hi - lo <= 0.03 * z + 0.01)
+        rays = self.normalised(xy[ok])
+        out[ok, :2] = rays * z[ok, None]
+        out[ok, 2] = z[ok]
+        return out
+
+    def normalised(self, xy: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        """Return normalised image coordinates (x/z, y/z) of pixels, undistorted if needed."""
+        if self.dist is None:
+            k = self.intrinsics
+            return np.stack([(xy[:, 0] - k.cx) / k.fx, (xy[:, 1] - k.cy) / k.fy], axis=1).astype(
+                np.float32
+            )
+        und = cv2.undistortPoints(
+            xy.reshape(-1, 1, 2).astype(np.float64), self.camera_matrix, self.dist
+        )
+        return und.reshape(-1, 2).astype(np.float32)
+
+
+def thumbnail(gray: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
+    """Return a small blurred, zero-mean, unit-norm image for appearance-based place recognition."""
+    resized = cv2.resize(gray, THUMB_SIZE, interpolation=cv2.INTER_AREA).astype(np.float32)
+    small = np.asarray(cv2.GaussianBlur(resized, (3, 3), 0), np.float32).ravel()
+    small -= small.mean()
+    norm = float(np.linalg.norm(small))
+    return small / norm if norm > 1e-6 else small
+
+
+def match(
+    query: npt.NDArray[np.uint8], train: npt.NDArray[np.uint8], *, ratio: float
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Return (query index, train index) of matches that pass Lowe's ratio test."""
+    if len(query) < 2 or len(train) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    pairs = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(query, train, k=2)
+    q, t = [], []
+    for pair in pairs:
+        if len(pair) == 2 and pair[0].distance < ratio * pair[1].distance:
+            q.append(pair[0].queryIdx)
+            t.append(pair[0].trainIdx)
+    return np.array(q, np.int64), np.array(t, np.int64)
+
+
+@dataclass(frozen=True, slots=True)
+class PnpSolver:
+    """PnP RANSAC on 3-D/2-D matches, then Levenberg-Marquardt on the inliers."""
+
+    camera_matrix: npt.NDArray[np.float64]
+    dist: npt.NDArray[np.float64] | None
+    reprojection_px: float
+    iterations: int
+    confidence: float
+
+    def solve(
+        self, points: npt.NDArray[np.float32], xy: npt.NDArray[np.float32], *, min_inliers: int
+    ) -> PnpResult | None:
+        """Return the pose mapping reference points onto pixels, or None with < min_inliers."""
+        if len(points) < max(min_inliers, 6):
+            return None
+        obj = np.ascontiguousarray(points, np.float64)
+        img = np.ascontiguousarray(xy, np.float64)
+        ok, rvec_guess, tvec_guess, inliers = cv2.solvePnPRansac(
+            obj,
+            img,
+            self.camera_matrix,
+            self.dist,
+            iterationsCount=self.iterations,
+            reprojectionError=self.reprojection_px,
+            confidence=self.confidence,
+            flags=cv2.SOLVEPNP_EPNP,
+        )
+        if not ok or inliers is None or len(inliers) < min_inliers:
+            return None
+        idx = np.asarray(inliers).ravel().astype(np.int64)
+        rvec, tvec = np.asarray(rvec_guess, np.float64), np.asarray(tvec_guess, np.float64)
+        # Two rounds of LM on the inliers, re-selecting them with the refined pose in between.
+        for _ in range(2):
+            refined = cv2.solvePnPRefineLM(
+                obj[idx], img[idx], self.camera_matrix, self.dist, rvec, tvec
+            )
+            rvec, tvec = np.asarray(refined[0], np.float64), np.asarray(refined[1], np.float64)
+            err = _reprojection_errors(obj, img, rvec, tvec, self.camera_matrix, self.dist)
+            idx = np.flatnonzero(err < self.reprojection_px).astype(np.int64)
+            if len(idx) < min_inliers:
+                return None
+        rms = float(np.sqrt(np.mean(err[idx] ** 2)))
+        return PnpResult(to_matrix(rvec, tvec), idx, rms)
+
+
+def _reprojection_errors(
+    obj: npt.NDArray[np.float64],
+    img: npt.NDArray[np.float64],
+    rvec: npt.NDArray[np.float64],
+    tvec: npt.NDArray[np.float64],
+    camera_matrix: npt.NDArray[np.float64],
+    dist: npt.NDArray[np.float64] | None,
+) -> npt.NDArray[np.float64]:
+    proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
+    err = np.asarray(np.linalg.norm(np.asarray(proj).reshape(-1, 2) - img, axis=1), np.float64)
+    rot = np.asarray(cv2.Rodrigues(rvec)[0], np.float64)
+    behind = (obj @ rot.T + tvec.reshape(1, 3))[:, 2] <= 0
+    err[behind] = np.inf
+    return err
+
+
+def rigid_inverse(transform: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Return the inverse of a 4x4 rigid transform."""
+    out = np.eye(4)
+    rot = transform[:3, :3]
+    out[:3, :3] = rot.T
+    out[:3, 3] = -rot.T @ transform[:3, 3]
+    return out
+
+
+def to_matrix(
+    rvec: npt.NDArray[np.float64], tvec: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """Return the 4x4 transform of an OpenCV (rvec, tvec) pair."""
+    out = np.eye(4)
+    out[:3, :3] = np.asarray(cv2.Rodrigues(np.asarray(rvec, np.float64))[0], np.float64)
+    out[:3, 3] = np.asarray(tvec, np.float64).ravel()
+    return out
+
+
+def visible_share(
+    points: npt.NDArray[np.float32], camera_from_points: npt.NDArray[np.float64], intr: Intrinsics
+) -> float:
+    """Return the share of points (their own frame) that a camera sees inside its image."""
+    if len(points) == 0:
+        return 0.0
+    rot = camera_from_points[:3, :3].astype(np.float32)
+    p = points @ rot.T + camera_from_points[:3, 3].astype(np.float32)
+    z = np.maximum(p[:, 2], 1e-6)
+    u = p[:, 0] / z * intr.fx + intr.cx
+    v = p[:, 1] / z * intr.fy + intr.cy
+    inside = (p[:, 2] > 0) & (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
+    return float(inside.mean())
+
+
+def information_from_points(points: npt.NDArray[np.float32]) -> npt.NDArray[np.float64]:
+    """Return the 6x6 information of a rigid alignment supported by these points (target frame).
+
+    The same sum of G^T G over correspondences as Open3D's
+    get_information_matrix_from_point_clouds, computed here from matched points instead of clouds.
+    """
+    p = np.asarray(points, np.float64)
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    g = np.stack(
+        [
+            np.stack([zero, z, -y, one, zero, zero], axis=1),
+            np.stack([-z, zero, x, zero, one, zero], axis=1),
+            np.stack([y, -x, zero, zero, zero, one], axis=1),
+        ],
+        axis=1,
+    )  # (N, 3, 6)
+    return np.asarray(np.einsum("nri,nrj->ij", g, g), np.float64)

@@ -1,0 +1,378 @@
+"""The odometry's state machine: initialise, track, make keyframes, relocalise, close loops."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import RgbdFrame
+from process.loop_closure import Edge, PoseGraph, find_loop, loop_candidates
+from process.odometry_dense import DenseAligner, pose_difference
+from process.odometry_features import (
+    FeatureExtractor,
+    Keyframe,
+    PnpResult,
+    PnpSolver,
+    information_from_points,
+    match,
+    rigid_inverse,
+    thumbnail,
+    visible_share,
+)
+
+if TYPE_CHECKING:
+    from process.odometry import OdometryConfig
+
+_WEAK_INFORMATION = 1e-3  # ties a new segment to the old one without constraining it
+
+
+@dataclass(frozen=True, slots=True)
+class TrackState:
+    """The tracker's verdict on one frame (the Odometry turns it into a TrackResult)."""
+
+    keyframe_id: int  # -1 before initialisation
+    keyframe_from_camera: npt.NDArray[np.float64]  # (4, 4)
+    is_keyframe: bool
+    status: str
+    n_inliers: int
+    keypoints_xy: npt.NDArray[np.float32]  # (N, 2)
+    inlier_mask: npt.NDArray[np.bool_]  # (N,)
+    matched_keyframe_xy: npt.NDArray[np.float32]  # (N, 2), NaN where unmatched
+    event: str | None = None
+    trajectory_corrected: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class _Image:
+    """One frame's inputs to the tracker."""
+
+    frame: RgbdFrame
+    gray: npt.NDArray[np.uint8]
+    depth: npt.NDArray[np.float32]
+    xy: npt.NDArray[np.float32]  # (N, 2) ORB keypoints
+    descriptors: npt.NDArray[np.uint8]  # (N, 32)
+
+
+@dataclass(frozen=True, slots=True)
+class _Found:
+    keyframe: Keyframe
+    pnp: PnpResult
+    query: npt.NDArray[np.int64]  # matched current features
+    train: npt.NDArray[np.int64]  # their keyframe features
+
+
+class Tracker:
+    """Track frames against keyframes and keep the pose graph; see process.odometry."""
+
+    def __init__(
+        self,
+        cfg: OdometryConfig,
+        *,
+        extractor: FeatureExtractor,
+        dense: DenseAligner,
+        graph: PoseGraph,
+        keyframes: list[Keyframe],
+    ) -> None:
+        self.cfg = cfg
+        self.extractor = extractor
+        self.dense = dense
+        self.graph = graph
+        self.keyframes = keyframes
+        self.pnp = PnpSolver(
+            extractor.camera_matrix,
+            extractor.dist,
+            cfg.ransac_reprojection_px,
+            cfg.ransac_iterations,
+            cfg.ransac_confidence,
+        )
+        self._ref: Keyframe | None = None
+        self._kf_from_camera = np.eye(4)
+        self._last_world = np.eye(4)
+        self._last_gray: npt.NDArray[np.uint8] | None = None
+        self._frozen = False
+        self._lost = 0
+        self._failure = ""
+        self._segment = 0
+        self._cooldown = 0
+
+    def step(
+        self, gray: npt.NDArray[np.uint8], depth: npt.NDArray[np.float32], frame: RgbdFrame
+    ) -> TrackState:
+        """Track one frame: its grey image and its depth in the colour camera."""
+        if self._last_gray is not None and np.array_equal(gray, self._last_gray):
+            event = (
+                None
+                if self._frozen
+                else f"frozen frame {frame.index}: identical to the previous one"
+            )
+            self._frozen = True
+            return self._hold("frozen", event, np.zeros((0, 2), np.float32))
+        self._frozen = False
+        self._last_gray = gray
+        image = _Image(frame, gray, depth, *self.extractor.detect(gray))
+        if self._ref is None:
+            return self._initialise(image)
+        found = self._track(self._ref, image) or self._relocalise(image)
+        if found is None:
+            return self._on_lost(image)
+        return self._on_found(found, image)
+
+    # -- tracking ------------------------------------------------------------------------------
+    def _track(self, kf: Keyframe, image: _Image) -> _Found | None:
+        """Return the pose of the image against a keyframe, or None (reason in self._failure)."""
+        q, t = match(image.descriptors, kf.descriptors, ratio=self.cfg.match_ratio)
+        pnp = self.pnp.solve(kf.points[t], image.xy[q], min_inliers=self.cfg.min_inliers)
+        if pnp is None:
+            self._failure = (
+                f"{len(image.xy)} features, {len(q)} matches, < {self.cfg.min_inliers} PnP inliers"
+            )
+            return None
+        if not self._lost:
+            world = self.graph.poses[kf.id] @ pnp.reference_from_camera
+            step_m, _ = pose_difference(self._last_world, world)
+            if step_m > self.cfg.max_step_m:
+                self._failure = f"a jump of {step_m:.2f} m (> max_step_m {self.cfg.max_step_m})"
+                return None
+        return _Found(kf, pnp, q, t)
+
+    def _relocalise(self, image: _Image) -> _Found | None:
+        """Try the recent keyframes and the two that look most alike; keep the best."""
+        failure, n = self._failure, self.cfg.relocalise_keyframes
+        ids = [k.id for k in self.keyframes[-n - 1 :] if k is not self._ref][-n:] if n else []
+        if n and len(self.keyframes) > len(ids) + 1:
+            thumb = thumbnail(image.gray)
+            scores = np.array([float(k.thumbnail @ thumb) for k in self.keyframes])
+            ids += [int(i) for i in np.argsort(-scores)[:2] if int(i) not in ids]
+        best: _Found | None = None
+        for i in ids:
+            found = self._track(self.keyframes[i], image)
+            if found is not None and (
+                best is None or len(found.pnp.inliers) > len(best.pnp.inliers)
+            ):
+                best = found
+        self._failure = failure
+        return best
+
+    def _on_found(self, found: _Found, image: _Image) -> TrackState:
+        kf, n_inliers = found.keyframe, len(found.pnp.inliers)
+        kf_from_camera = found.pnp.reference_from_camera
+        status, events = "ok", []
+        if self._lost or kf is not self._ref:
+            status = "relocalised"
+            after = f" after {self._lost} lost frame(s)" if self._lost else ""
+            events.append(f"relocalised frame {image.frame.index} against keyframe {kf.id}{after}")
+        self._lost = 0
+        is_keyframe = kf is not self._ref or self._needs_keyframe(kf, kf_from_camera, n_inliers)
+        self._set_reference(kf)
+        corrected = False
+        if is_keyframe:
+            made = self._make_keyframe(found, kf_from_camera, image)
+            is_keyframe = made is not None
+            if made is not None:
+                kf_from_camera, corrected = np.eye(4), bool(made)
+                events.append(made)
+        elif self.cfg.dense_refine_all_frames and kf.dense is not None:
+            current = self.dense.prepare(image.gray, image.depth)
+            kf_from_camera = self._refine(current, kf.dense, kf_from_camera)
+        ref = self._ref
+        assert ref is not None  # set above
+        self._kf_from_camera = kf_from_camera
+        self._last_world = self.graph.poses[ref.id] @ kf_from_camera
+        event = "; ".join(e for e in events if e) or None
+        return TrackState(
+            ref.id,
+            kf_from_camera,
+            is_keyframe,
+            status,
+            n_inliers,
+            *_match_arrays(found, image.xy),
+            event,
+            corrected,
+        )
+
+    def _needs_keyframe(
+        self, kf: Keyframe, kf_from_camera: npt.NDArray[np.float64], n_inliers: int
+    ) -> bool:
+        cfg = self.cfg
+        moved_m, turned_deg = pose_difference(np.eye(4), kf_from_camera)
+        if moved_m > cfg.keyframe_translation_m or turned_deg > cfg.keyframe_rotation_deg:
+            return True
+        if n_inliers < cfg.keyframe_min_inliers:
+            return True
+        share = visible_share(kf.points, rigid_inverse(kf_from_camera), self.extractor.intrinsics)
+        return share < cfg.keyframe_min_overlap
+
+    # -- keyframes -----------------------------------------------------------------------------
+    def _new_keyframe(
+        self, image: _Image, *, world_from_keyframe: npt.NDArray[np.float64]
+    ) -> Keyframe | None:
+        """Add the image as a keyframe (node of the graph) if it has enough features with depth."""
+        points = self.extractor.lift(image.xy, image.depth)
+        has = np.isfinite(points[:, 2])
+        if int(has.sum()) < 2 * self.cfg.min_inliers:
+            self._failure = (
+                f"{int(has.sum())} features with depth (need {2 * self.cfg.min_inliers})"
+            )
+            return None
+        kf = Keyframe(
+            id=len(self.keyframes),
+            frame_index=image.frame.index,
+            stamp_ns=image.frame.stamp_ns,
+            segment=self._segment,
+            xy=image.xy[has],
+            descriptors=image.descriptors[has],
+            points=points[has],
+            thumbnail=thumbnail(image.gray),
+        )
+        self.graph.add_node(world_from_keyframe)
+        self.keyframes.append(kf)
+        self._set_reference(kf)
+        return kf
+
+    def _set_reference(self, kf: Keyframe) -> None:
+        if self._ref is not None and self._ref is not kf:
+            self._ref.dense = None  # only the reference keyframe keeps its images
+        self._ref = kf
+
+    def _make_keyframe(
+        self, found: _Found, kf_from_camera: npt.NDArray[np.float64], image: _Image
+    ) -> str | None:
+        """Make the image a keyframe; return None if it cannot be, else the loop event or ""."""
+        parent = found.keyframe
+        dense = self.dense.prepare(image.gray, image.depth) if self.cfg.dense_refine else None
+        if dense is not None and parent.dense is not None:
+            kf_from_camera = self._refine(dense, parent.dense, kf_from_camera)
+        kf = self._new_keyframe(
+            image, world_from_keyframe=self.graph.poses[parent.id] @ kf_from_camera
+        )
+        if kf is None:
+            return None
+        kf.dense = dense
+        support = information_from_points(parent.points[found.train[found.pnp.inliers]])
+        self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, support, False))
+        return self._close_loop(kf)
+
+    def _refine(
+        self, source: Any, target: Any, kf_from_camera: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.float64]:
+        """Return the densely refined relative pose, or the given one where refinement fails."""
+        cfg = self.cfg
+        result = self.dense.align(source, target, init_target_from_source=kf_from_camera)
+        if result is None or result.fitness < cfg.dense_min_fitness:
+            return kf_from_camera
+        moved_m, turned_deg = pose_difference(kf_from_camera, result.target_from_source)
+        if moved_m > cfg.dense_max_correction_m or turned_deg > cfg.dense_max_correction_deg:
+            return kf_from_camera
+        return result.target_from_source
+
+    def _initialise(self, image: _Image) -> TrackState:
+        kf = self._new_keyframe(image, world_from_keyframe=np.eye(4))
+        if kf is None:
+            self._lost += 1
+            note = f"cannot initialise tracking at frame {image.frame.index}: {self._failure}"
+            return self._hold("lost", note if self._lost == 1 else None, image.xy)
+        if self.cfg.dense_refine:
+            kf.dense = self.dense.prepare(image.gray, image.depth)
+        self._lost = 0
+        note = (
+            f"tracking initialised at frame {image.frame.index} ({len(kf.xy)} features with depth)"
+        )
+        return self._keyframe_state(kf, image.xy, "ok", note)
+
+    def _on_lost(self, image: _Image) -> TrackState:
+        self._lost += 1
+        event = (
+            f"tracking lost at frame {image.frame.index}: {self._failure}"
+            if self._lost == 1
+            else None
+        )
+        old = self._ref
+        if self._lost < self.cfg.lost_frames_new_segment or old is None:
+            return self._hold("lost", event, image.xy)
+        self._segment += 1
+        kf = self._new_keyframe(image, world_from_keyframe=self._last_world)
+        if kf is None:
+            self._segment -= 1
+            return self._hold("lost", event, image.xy)
+        if self.cfg.dense_refine:
+            kf.dense = self.dense.prepare(image.gray, image.depth)
+        # The new segment starts where the camera was last seen, tied by a weak edge only.
+        old_from_new = rigid_inverse(self.graph.poses[old.id]) @ self._last_world
+        self.graph.add_edge(Edge(kf.id, old.id, old_from_new, np.eye(6) * _WEAK_INFORMATION, False))
+        note = (
+            f"new segment {self._segment} at frame {image.frame.index}"
+            f" after {self._lost} lost frames"
+        )
+        self._lost = 0
+        return self._keyframe_state(kf, image.xy, "new_segment", note)
+
+    def _keyframe_state(
+        self, kf: Keyframe, xy: npt.NDArray[np.float32], status: str, event: str
+    ) -> TrackState:
+        self._kf_from_camera = np.eye(4)
+        self._last_world = self.graph.poses[kf.id].copy()
+        nan = np.full((len(xy), 2), np.nan, np.float32)
+        return TrackState(
+            kf.id, np.eye(4), True, status, 0, xy, np.zeros(len(xy), bool), nan, event
+        )
+
+    def _hold(self, status: str, event: str | None, xy: npt.NDArray[np.float32]) -> TrackState:
+        """Keep the last pose: a lost or frozen frame is assumed not to have moved."""
+        ref = self._ref.id if self._ref is not None else -1
+        nan = np.full((len(xy), 2), np.nan, np.float32)
+        mask = np.zeros(len(xy), bool)
+        return TrackState(ref, self._kf_from_camera.copy(), False, status, 0, xy, mask, nan, event)
+
+    # -- loop closure --------------------------------------------------------------------------
+    def _close_loop(self, kf: Keyframe) -> str:
+        """Search a loop from a new keyframe; on one, optimise the graph and describe it."""
+        cfg = self.cfg
+        if not cfg.loop_closure:
+            return ""
+        if self._cooldown > 0:
+            self._cooldown -= 1
+            return ""
+        ids = loop_candidates(
+            kf,
+            self.keyframes,
+            poses=self.graph.poses,
+            min_gap=cfg.loop_min_gap,
+            count=cfg.loop_candidates,
+            min_similarity=cfg.loop_min_similarity,
+            radius_m=cfg.loop_search_radius_m,
+        )
+        candidates = [self.keyframes[i] for i in ids]
+        found = find_loop(
+            kf,
+            candidates,
+            pnp=self.pnp,
+            match_ratio=cfg.match_ratio,
+            min_inliers=cfg.loop_min_inliers,
+        )
+        if found is None:
+            return ""
+        edge, n_inliers = found
+        self.graph.add_edge(edge)
+        moved_m, kept = self.graph.optimise(
+            max_correspondence_m=cfg.loop_max_correspondence_m,
+            prune_threshold=cfg.loop_prune_threshold,
+        )
+        self._cooldown = cfg.loop_cooldown
+        return (
+            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers);"
+            f" {kept} loop edge(s) kept, keyframes moved by up to {moved_m:.3f} m"
+        )
+
+
+def _match_arrays(
+    found: _Found, xy: npt.NDArray[np.float32]
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], npt.NDArray[np.float32]]:
+    """Return (keypoints, inlier mask, matched keyframe keypoint per keypoint) for the timeline."""
+    inliers = np.zeros(len(xy), bool)
+    inliers[found.query[found.pnp.inliers]] = True
+    matched = np.full((len(xy), 2), np.nan, np.float32)
+    matched[found.query] = found.keyframe.xy[found.train]
+    return xy, inliers, matched
