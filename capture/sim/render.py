@@ -120,6 +120,9 @@ class Renderer:
         self._glossy = np.array([m.glossy for m in materials])[part_material]
         self._tables = _triangle_tables(scene, part_material, [1.0 / m.texel_m for m in materials])
         self._dirs: dict[Intrinsics, tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]] = {}
+        # Open3D builds the BVH lazily on the first cast; build it now, before worker threads cast.
+        probe = np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]], np.float32)
+        self._raycaster.cast_rays(o3d.core.Tensor.from_numpy(probe))
 
     def _directions(self, k: Intrinsics) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
         """Return camera-frame ray directions (H*W, 3) with z = 1 and their inverse lengths."""
