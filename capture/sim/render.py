@@ -19,8 +19,6 @@ from capture.frames import Extrinsics, Intrinsics
 from capture.sim.scene import Scene
 from capture.sim.textures import TEXTURE_SIZE, make_texture
 
-AMBIENT: Final = 0.45
-DIFFUSE: Final = 0.6  # summed over the lights
 _TEXEL_OFFSET: Final = 32.0 * TEXTURE_SIZE  # keeps texel coordinates positive before the wrap
 INVALID_ID: Final = np.uint32(0xFFFFFFFF)  # Embree's geometry id of a ray that hit nothing
 
@@ -113,7 +111,8 @@ class Renderer:
         self._label = np.array([p.label for p in scene.parts] + [0], np.uint8)
         self._instance = np.array([p.instance for p in scene.parts] + [0], np.uint16)
         part_material = np.array([index[p.material] for p in scene.parts] + [0], np.int64)
-        textures = np.stack([make_texture(m) for m in materials])
+        tinted = [make_texture(m) * np.asarray(scene.tint, np.float32) for m in materials]
+        textures = np.stack([np.minimum(t, 255.0).astype(np.uint8) for t in tinted])
         self._texels = textures.reshape(-1, 3)
         luminance = textures.reshape(len(materials), -1, 3).mean(axis=1) @ [0.299, 0.587, 0.114]
         self._luminance = (luminance / 255.0).astype(np.float32)[part_material]
@@ -221,7 +220,7 @@ def _triangle_tables(
         uv = np.take_along_axis(v, axes[:, None, :], axis=2) * inv_texel[material]  # (M, 3, 2)
         uv -= np.floor(uv[:, :1] / TEXTURE_SIZE) * TEXTURE_SIZE
         uv += _TEXEL_OFFSET
-        shade = np.minimum(_lambert(v, normal, scene.lights_m), 1.0)  # (M, 3); x 256 fits uint16
+        shade = np.minimum(_lambert(v, normal, scene), 1.0)  # (M, 3); x 256 fits uint16
         base = np.full((len(v), 1), material * TEXTURE_SIZE * TEXTURE_SIZE, np.float64)
         rows.append(
             np.concatenate([_deltas(uv[..., 0]), _deltas(uv[..., 1]), _deltas(shade), base], 1)
@@ -236,14 +235,12 @@ def _deltas(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 
 
 def _lambert(
-    vertices: npt.NDArray[np.float64],
-    normal: npt.NDArray[np.float64],
-    lights: npt.NDArray[np.float64],
+    vertices: npt.NDArray[np.float64], normal: npt.NDArray[np.float64], scene: Scene
 ) -> npt.NDArray[np.float64]:
-    """Return ambient + Lambert shade (M, 3) at each triangle vertex from the point lights."""
-    shade = np.full(vertices.shape[:2], AMBIENT)
-    for light in lights:
+    """Return ambient + Lambert shade (M, 3) at each triangle vertex from the scene's lights."""
+    shade = np.full(vertices.shape[:2], scene.ambient)
+    for light in scene.lights_m:
         to_light = light - vertices
         cos = np.einsum("mvk,mk->mv", to_light, normal) / np.linalg.norm(to_light, axis=2)
-        shade += DIFFUSE / len(lights) * np.maximum(cos, 0.0)
+        shade += scene.diffuse / len(scene.lights_m) * np.maximum(cos, 0.0)
     return shade

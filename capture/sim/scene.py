@@ -30,6 +30,9 @@ class Scene:
     instance_names: dict[int, str]  # instance id -> object name ("chair", "wall", ...)
     lights_m: npt.NDArray[np.float64]  # (L, 3) point lights under the ceiling
     path: LoopPath  # the camera's walking loop, kept free of furniture
+    ambient: float = 0.45  # light reaching every surface
+    diffuse: float = 0.6  # Lambert light of the point lights, summed
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)  # colour of the light (white balance)
 
     @property
     def labels(self) -> set[int]:
@@ -86,7 +89,12 @@ def _attempt(seed: int, attempt: int) -> tuple[Scene, bool]:
     complete = furnish(placer, rng)
     names = {**STRUCTURE_NAMES, **placer.names}
     lights = np.array([[*rng.uniform(-0.25, 0.25, 2) * room[:2], room[2] - 0.1] for _ in range(2)])
-    return Scene(seed, room, tuple(placer.parts), names, lights, path), complete
+    light = np.random.default_rng([seed, attempt, 99])  # apart, so layouts do not depend on it
+    ambient, diffuse = float(light.uniform(0.35, 0.55)), float(light.uniform(0.45, 0.7))
+    warmth = float(light.uniform(-1.0, 1.0))  # warm (yellowish) to cool (bluish) light
+    tint = (1.0 + 0.06 * warmth, 1.0, 1.0 - 0.1 * warmth)
+    scene = Scene(seed, room, tuple(placer.parts), names, lights, path, ambient, diffuse, tint)
+    return scene, complete
 
 
 def build_scene(seed: int) -> Scene:
