@@ -6,13 +6,15 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from capture.errors import CaptureError
-from capture.mcap_threaded import ThreadedWriter
+from capture.frames import Extrinsics, Intrinsics
+from capture.mcap_threaded import ThreadedWriter, finish_recording
+from capture.mcap_writer import RecordingWriter
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +88,20 @@ class RecordResult:
     camera_lost: bool = False
 
 
+@dataclass(slots=True)
+class Streams:
+    """The depth and colour streams of a device, with their calibration."""
+
+    device: Any
+    sensors: list[tuple[Any, list[Any]]]  # (sensor, the profiles to open on it)
+    color_format: str
+    color_intrinsics: Intrinsics
+    depth_intrinsics: Intrinsics
+    depth_to_color: Extrinsics
+    depth_scale_m: float
+    info: dict[str, str] = field(default_factory=dict)
+
+
 class Restartable(Protocol):
     """A running camera that can be restarted and may have failed."""
 
@@ -93,6 +109,9 @@ class Restartable(Protocol):
 
     def restart(self) -> None:
         """Stop and start the camera's sensors again."""
+
+    def stop(self) -> None:
+        """Stop the camera's sensors."""
 
 
 def tool_version() -> str:
@@ -154,3 +173,38 @@ def watch(
             )
             last = (now, stats.written["color"], stats.image_bytes)
     return "stopped", False
+
+
+def start_sink(
+    path: Path, streams: Streams, *, config: RecordConfig, blocking: bool
+) -> ThreadedWriter:
+    """Open the recording, write its `device` record and start its writer thread."""
+    writer = RecordingWriter(path, compression=config.compression, color_jpeg=config.color_jpeg)
+    info = {**streams.info, "depth_scale_m": "0.001",
+            "sensor_depth_scale_m": repr(streams.depth_scale_m)}  # fmt: skip
+    writer.write_metadata("device", info)  # depth is converted to mm at capture
+    sink = ThreadedWriter(
+        writer,
+        color_intrinsics=streams.color_intrinsics,
+        depth_intrinsics=streams.depth_intrinsics,
+        depth_to_color=streams.depth_to_color,
+        aligned=config.align,
+        depth_scale_m=streams.depth_scale_m,
+        queue_size=config.queue_size,
+        blocking=blocking,
+    )
+    sink.start()
+    return sink
+
+
+def finish_session(
+    sink: ThreadedWriter, camera: Restartable, *, path: Path, t0: float, reason: str, lost: bool
+) -> RecordResult:
+    """Stop the camera, write what is queued and finish the file; raise why it failed, if it did."""
+    camera.stop()
+    stats = sink.stop()
+    finish_recording(sink.writer, sink.summary(stats))
+    error = sink.error or camera.error
+    if error is not None:
+        raise error
+    return RecordResult(path, stats.written, stats.dropped, time.monotonic() - t0, reason, lost)

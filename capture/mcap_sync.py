@@ -113,9 +113,7 @@ def decode_depth(topic: str, msg: Any, path: Path, *, scale_m: float) -> npt.NDA
     order = ">" if msg.is_bigendian else "<"
     if enc in ("16UC1", "MONO16"):
         raw = image_array(topic, msg, np.dtype(order + "u2"), 1, path)
-        # Divide by units per metre (1000 for mm): correctly rounded, so 1234 mm is
-        # float32(1.234); multiplying by float32(0.001) would be one ulp off.
-        return raw.astype(np.float32) / np.float32(1.0 / scale_m)
+        return raw.astype(np.float32) * np.float32(scale_m)
     if enc == "32FC1":
         d = image_array(topic, msg, np.dtype(order + "f4"), 1, path).astype(np.float32)
         return np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0)

@@ -9,14 +9,13 @@ import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any, Final
+from typing import IO, Any
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 from mcap.well_known import SchemaEncoding
 from mcap_ros2._dynamic import serialize_dynamic
-from scipy.spatial.transform import Rotation
 
 from capture import ros_msgs as m
 from capture.errors import RecordingError
@@ -24,18 +23,6 @@ from capture.frames import Extrinsics, Intrinsics, RgbdFrame
 from capture.mcap_chunked import COMPRESSIONS, McapChunkWriter
 
 logger = logging.getLogger(__name__)
-
-# camera_link (x forward, y left, z up) from an optical frame (x right, y down, z forward).
-LINK_FROM_OPTICAL: Final = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
-def _pose_dict(matrix: npt.NDArray[np.float64]) -> tuple[dict[str, float], dict[str, float]]:
-    x, y, z, w = Rotation.from_matrix(matrix[:3, :3]).as_quat()
-    t = matrix[:3, 3]
-    return (
-        {"x": float(t[0]), "y": float(t[1]), "z": float(t[2])},
-        {"x": float(x), "y": float(y), "z": float(z), "w": float(w)},
-    )
 
 
 def camera_info(stamp_ns: int, frame_id: str, k: Intrinsics) -> dict[str, object]:
@@ -180,24 +167,7 @@ class RecordingWriter:
             stamp_ns=stamp_ns,
             log_ns=stamp_ns,
         )
-        # camera_link sits at the depth optical origin, as in realsense-ros.
-        link_from_depth = np.eye(4)
-        link_from_depth[:3, :3] = LINK_FROM_OPTICAL
-        link_from_color = link_from_depth @ np.linalg.inv(depth_to_color.color_from_depth)
-        transforms = []
-        for child, matrix in (
-            (m.DEPTH_FRAME_ID, link_from_depth),
-            (m.COLOR_FRAME_ID, link_from_color),
-        ):
-            translation_d, rotation_d = _pose_dict(matrix)
-            transforms.append(
-                {
-                    "header": m.header(stamp_ns, m.LINK_FRAME_ID),
-                    "child_frame_id": child,
-                    "transform": {"translation": translation_d, "rotation": rotation_d},
-                }
-            )
-        msg = {"transforms": transforms}
+        msg = m.tf_static(depth_to_color.color_from_depth, stamp_ns)
         self.write_message(m.TF_STATIC, m.TF_MESSAGE, msg, stamp_ns=stamp_ns, log_ns=stamp_ns)
 
     def write_color(
@@ -310,11 +280,7 @@ class RecordingWriter:
         """Write the ground-truth pose (world_from_color_optical), label and instance images."""
         log = stamp_ns if log_ns is None else log_ns
         if world_from_camera is not None:
-            position, orientation = _pose_dict(np.asarray(world_from_camera, dtype=np.float64))
-            msg = {
-                "header": m.header(stamp_ns, m.WORLD_FRAME_ID),
-                "pose": {"position": position, "orientation": orientation},
-            }
+            msg = m.pose_stamped(stamp_ns, m.WORLD_FRAME_ID, world_from_camera)
             self.write_message(m.GT_POSE, m.POSE_STAMPED, msg, stamp_ns=stamp_ns, log_ns=log)
         for topic, img, encoding, dtype in (
             (m.GT_LABELS, labels, "mono8", np.dtype(np.uint8)),

@@ -12,8 +12,8 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterator
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +27,13 @@ from capture.mcap_session import (
     RecordConfig,
     RecordResult,
     RecordStatus,
+    Streams,
     capture_record,
+    finish_session,
+    start_sink,
     watch,
 )
-from capture.mcap_threaded import StreamFrame, ThreadedWriter, finish_recording
-from capture.mcap_writer import RecordingWriter
+from capture.mcap_threaded import StreamFrame, ThreadedWriter
 
 __all__ = ["RecordConfig", "RecordResult", "RecordStatus", "convert", "record"]
 
@@ -52,20 +54,6 @@ def rs_module() -> Any:
             f"pyrealsense2 is not installed ({err}); install it: pip install '.[capture]'"
         ) from err
     return rs
-
-
-@dataclass(slots=True)
-class Streams:
-    """The depth and colour streams of a device, with their calibration."""
-
-    device: Any
-    sensors: list[tuple[Any, list[Any]]]  # (sensor, the profiles to open on it)
-    color_format: str
-    color_intrinsics: Intrinsics
-    depth_intrinsics: Intrinsics
-    depth_to_color: Extrinsics
-    depth_scale_m: float
-    info: dict[str, str] = field(default_factory=dict)
 
 
 def intrinsics_of(rs: Any, profile: Any) -> Intrinsics:
@@ -303,38 +291,16 @@ class Camera:
                 self.error = CameraError(f"aligning depth to colour failed: {err}")
 
 
-def _start_sink(
-    path: Path, streams: Streams, *, config: RecordConfig, blocking: bool
-) -> ThreadedWriter:
-    writer = RecordingWriter(path, compression=config.compression, color_jpeg=config.color_jpeg)
-    info = {**streams.info, "depth_scale_m": "0.001",
-            "sensor_depth_scale_m": repr(streams.depth_scale_m)}  # fmt: skip
-    writer.write_metadata("device", info)  # depth is converted to mm at capture
-    sink = ThreadedWriter(
-        writer,
-        color_intrinsics=streams.color_intrinsics,
-        depth_intrinsics=streams.depth_intrinsics,
-        depth_to_color=streams.depth_to_color,
-        aligned=config.align,
-        depth_scale_m=streams.depth_scale_m,
-        queue_size=config.queue_size,
-        blocking=blocking,
-    )
-    sink.start()
-    return sink
-
-
-def _finish(sink: ThreadedWriter, camera: Camera, path: Path, t0: float, reason: str,
-            lost: bool) -> RecordResult:  # fmt: skip
-    """Stop the camera, write what is queued and finish the file (or raise why it failed)."""
-    camera.stop()
-    stats = sink.stop()
-    error = sink.error or camera.error
-    if error is not None:
-        finish_recording(sink.writer, sink.summary(stats))
-        raise error
-    finish_recording(sink.writer, sink.summary(stats))
-    return RecordResult(path, stats.written, stats.dropped, time.monotonic() - t0, reason, lost)
+@contextlib.contextmanager
+def _librealsense(doing: str) -> Iterator[None]:
+    """Turn librealsense's RuntimeError into a one-line CameraError."""
+    try:
+        yield
+    except RuntimeError as err:
+        raise CameraError(
+            f"{doing} failed in librealsense ({err}); check the USB 3 cable and that no other "
+            "program holds the camera"
+        ) from err
 
 
 def record(
@@ -347,21 +313,23 @@ def record(
 ) -> RecordResult:
     """Record a live camera (or an injected pyrealsense2 device) until duration, stop or loss."""
     rs = rs_module()
-    dev = device if device is not None else find_device(rs, config.serial)
-    streams = select_streams(rs, dev, config)
-    configure(rs, streams, config)
-    sink = _start_sink(Path(path), streams, config=config, blocking=False)
+    with _librealsense("opening the camera"):
+        dev = device if device is not None else find_device(rs, config.serial)
+        streams = select_streams(rs, dev, config)
+        configure(rs, streams, config)
+    sink = start_sink(Path(path), streams, config=config, blocking=False)
     sink.writer.write_metadata("capture", capture_record("live", asdict(config)))
     camera = Camera(rs, streams, sink, align=config.align)
     t0 = time.monotonic()
     reason, lost = "stopped", False
     try:
-        camera.start()
+        with _librealsense("starting the camera streams"):
+            camera.start()
         reason, lost = watch(
             camera, sink, config, stop=stop or threading.Event(), on_status=on_status
         )
     finally:
-        result = _finish(sink, camera, Path(path), t0, reason, lost)
+        result = finish_session(sink, camera, path=Path(path), t0=t0, reason=reason, lost=lost)
     return result
 
 
@@ -383,9 +351,12 @@ def convert(
         raise CameraError(f"pyrealsense2 cannot play this recording ({err}): {src}") from err
     playback = dev.as_playback()
     playback.set_real_time(False)  # every frame, as fast as the writer takes them
-    streams = select_streams(rs, dev, None)
+    try:
+        streams = select_streams(rs, dev, None)
+    except CameraError as err:
+        raise CameraError(f"{err}: {src}") from err
     config = RecordConfig(compression=compression, queue_size=16)
-    sink = _start_sink(Path(out), streams, config=config, blocking=True)
+    sink = start_sink(Path(out), streams, config=config, blocking=True)
     sink.writer.write_metadata("capture", capture_record(str(src), {"compression": compression}))
     camera = Camera(rs, streams, sink, align=False)
     t0 = time.monotonic()
@@ -399,5 +370,7 @@ def convert(
             if ended and sink.idle and time.monotonic() - sink.last_submit_mono > idle_s:
                 break
     finally:
-        result = _finish(sink, camera, Path(out), t0, "end of file", False)
+        result = finish_session(
+            sink, camera, path=Path(out), t0=t0, reason="end of file", lost=False
+        )
     return result

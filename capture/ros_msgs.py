@@ -4,11 +4,17 @@ from __future__ import annotations
 
 from typing import Final
 
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
 DEFAULT_NAMESPACE: Final = "/camera/camera"
 COLOR_FRAME_ID: Final = "camera_color_optical_frame"
 DEPTH_FRAME_ID: Final = "camera_depth_optical_frame"
 LINK_FRAME_ID: Final = "camera_link"
 WORLD_FRAME_ID: Final = "world"
+# camera_link (x forward, y left, z up) from an optical frame (x right, y down, z forward).
+LINK_FROM_OPTICAL: Final = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 # Topic suffixes under the namespace; readers discover namespaces by these.
 COLOR_IMAGE: Final = "/color/image_raw"
@@ -156,3 +162,44 @@ def camera_info(
         "binning_y": 0,
         "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
     }
+
+
+def pose(matrix: npt.ArrayLike) -> tuple[dict[str, float], dict[str, float]]:
+    """Return the (position or translation, orientation quaternion) dicts of a 4x4 transform."""
+    mat = np.asarray(matrix, dtype=np.float64)
+    x, y, z, w = Rotation.from_matrix(mat[:3, :3]).as_quat()
+    t = mat[:3, 3]
+    return (
+        {"x": float(t[0]), "y": float(t[1]), "z": float(t[2])},
+        {"x": float(x), "y": float(y), "z": float(z), "w": float(w)},
+    )
+
+
+def pose_stamped(stamp_ns: int, frame_id: str, matrix: npt.ArrayLike) -> dict[str, object]:
+    """Return a geometry_msgs/PoseStamped dict of a 4x4 transform."""
+    position, orientation = pose(matrix)
+    return {
+        "header": header(stamp_ns, frame_id),
+        "pose": {"position": position, "orientation": orientation},
+    }
+
+
+def tf_static(color_from_depth: npt.NDArray[np.float64], stamp_ns: int) -> dict[str, object]:
+    """Return the tf2_msgs/TFMessage of camera_link -> both optical frames.
+
+    camera_link sits at the depth optical origin, as in realsense-ros.
+    """
+    link_from_depth = np.eye(4)
+    link_from_depth[:3, :3] = LINK_FROM_OPTICAL
+    link_from_color = link_from_depth @ np.linalg.inv(color_from_depth)
+    transforms = []
+    for child, matrix in ((DEPTH_FRAME_ID, link_from_depth), (COLOR_FRAME_ID, link_from_color)):
+        translation, rotation = pose(matrix)
+        transforms.append(
+            {
+                "header": header(stamp_ns, LINK_FRAME_ID),
+                "child_frame_id": child,
+                "transform": {"translation": translation, "rotation": rotation},
+            }
+        )
+    return {"transforms": transforms}

@@ -35,7 +35,7 @@ def test_independent_realsense_ros_recording_replays(shared_data: Path) -> None:
     for i, frame in enumerate(frames):
         png = np.asarray(cv2.imread(str(shared_data / "icl_nuim" / "depth" / f"{i:05d}.png"), -1))
         jpg = np.asarray(cv2.imread(str(shared_data / "icl_nuim" / "color" / f"{i:05d}.jpg")))
-        np.testing.assert_array_equal(frame.depth_m, png.astype(np.float32) / np.float32(1000.0))
+        np.testing.assert_array_equal(frame.depth_m, png.astype(np.float32) * np.float32(0.001))
         assert frame.color.shape == (480, 640, 3)
         # The other writer stored the decoded JPEG: the same pixels up to decoder rounding.
         assert np.abs(frame.color.astype(int) - jpg[..., ::-1].astype(int)).mean() < 1.0

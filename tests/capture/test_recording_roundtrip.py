@@ -10,6 +10,7 @@ import numpy.typing as npt
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from scipy.spatial.transform import Rotation
 
 from capture import ros_msgs as m
 from capture.recording import (
@@ -128,7 +129,7 @@ def test_aligned_depth_is_read_in_the_colour_camera(tmp_path: Path) -> None:
         (frame,) = list(rec.frames())
     assert frame.aligned and frame.depth_to_color is None
     assert frame.depth_intrinsics == frame.color_intrinsics == COLOR_K
-    assert np.all(frame.depth_m == np.float32(1.234))
+    assert np.all(frame.depth_m == np.float32(1234) * np.float32(0.001))
 
 
 def test_frames_of_a_time_range_and_whole_frame_values(tmp_path: Path) -> None:
@@ -151,7 +152,7 @@ def test_frames_of_a_time_range_and_whole_frame_values(tmp_path: Path) -> None:
         picked = list(rec.frames(start_ns=T0_NS + 200_000_000, end_ns=T0_NS + 400_000_000))
     assert [f.stamp_ns - T0_NS for f in picked] == [200_000_000, 300_000_000, 400_000_000]
     assert [f.index for f in picked] == [0, 1, 2]
-    assert [float(f.depth_m[0, 0]) for f in picked] == [1.0, 1.25, 1.5]
+    assert [float(f.depth_m[0, 0]) for f in picked] == pytest.approx([1.0, 1.25, 1.5], abs=1e-6)
 
 
 def test_jpeg_colour_decodes_close_to_the_original(tmp_path: Path, shared_data: Path) -> None:
@@ -219,3 +220,23 @@ def test_metadata_and_attachments_round_trip(tmp_path: Path) -> None:
     with RecordingReader(path) as rec:
         assert rec.metadata["device"] == {"name": "test", "depth_scale_m": "0.001"}
         assert rec.duration_ns == rec.end_ns - rec.start_ns == 1 + 1000
+
+
+def test_tf_static_composes_back_to_the_extrinsics(tmp_path: Path) -> None:
+    path = tmp_path / "tf.mcap"
+    _write(path, frames=1)
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        (msg,) = [d for _, _, _, d in reader.iter_decoded_messages(topics=[m.TF_STATIC])]
+    link_from: dict[str, npt.NDArray[np.float64]] = {}
+    for tf in msg.transforms:
+        assert tf.header.frame_id == m.LINK_FRAME_ID
+        t, q = tf.transform.translation, tf.transform.rotation
+        mat = np.eye(4)
+        mat[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        mat[:3, 3] = [t.x, t.y, t.z]
+        link_from[tf.child_frame_id] = mat
+    # camera_link is x forward, z up: the depth optical z axis (forward) is link x.
+    np.testing.assert_allclose(link_from[m.DEPTH_FRAME_ID][:3, 2], [1.0, 0.0, 0.0], atol=1e-12)
+    color_from_depth = np.linalg.inv(link_from[m.COLOR_FRAME_ID]) @ link_from[m.DEPTH_FRAME_ID]
+    np.testing.assert_allclose(color_from_depth, COLOR_FROM_DEPTH, atol=1e-12)
