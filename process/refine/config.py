@@ -1,0 +1,60 @@
+"""The refinement's configuration: the paper's parameters (Table 5, section 2.4) and ours."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from process.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Parameters of planes -> SOR -> adaptive DBSCAN -> regrowth.
+
+    The paper's Table 5 picks D = 0.10 m, Min = 250,000 and Max = 100,000 for a 2.3-million
+    point cloud of a whole office; our defaults suit voxel maps of 0.1-1 million points at
+    1-2 cm, where 0.10 m would swallow chair feet and table legs into the floor.
+    """
+
+    plane_distance_m: float = 0.02  # D: RANSAC inlier distance
+    plane_min_points: int = 10_000  # Min: a plane with fewer inliers ends the search
+    plane_max_remaining: int = 1000  # Max: the search ends once fewer points remain
+    plane_iterations: int = 300  # RANSAC iterations per plane (Table 5: 300)
+    plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
+    max_planes: int = 8  # planes tried at most, structural or not
+    horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
+    structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
+    wall_min_height_m: float = 1.5  # an upright plane is a wall when it rises this high
+    up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
+    sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
+    sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
+    dbscan_method: int = 2  # 1: one (eps, MinPts) for all classes; 2: one per class (paper)
+    k_max: int = 30  # largest K of the KANN eps_K candidates
+    min_cluster_points: int = 100  # clusters smaller than this go back to label 0
+    full_curves: bool = False  # run DBSCAN for every K, not only until the stable run ends
+    regrowth: bool = True  # recover unlabelled points around each cluster
+    seed: int = 0  # RANSAC sampling
+
+    def __post_init__(self) -> None:
+        checks = {
+            "plane_distance_m": (self.plane_distance_m, 1e-4, 1.0),
+            "plane_min_points": (self.plane_min_points, 3, 10**9),
+            "plane_max_remaining": (self.plane_max_remaining, 0, 10**9),
+            "plane_iterations": (self.plane_iterations, 1, 100_000),
+            "plane_sample_points": (self.plane_sample_points, 0, 10**9),
+            "max_planes": (self.max_planes, 0, 100),
+            "horizontal_tolerance_deg": (self.horizontal_tolerance_deg, 0.0, 45.0),
+            "structure_height_tol_m": (self.structure_height_tol_m, 0.0, 10.0),
+            "wall_min_height_m": (self.wall_min_height_m, 0.0, 100.0),
+            "sor_nb_neighbors": (self.sor_nb_neighbors, 1, 1000),
+            "sor_std_ratio": (self.sor_std_ratio, 0.01, 100.0),
+            "dbscan_method": (self.dbscan_method, 1, 2),
+            "k_max": (self.k_max, 3, 1000),
+            "min_cluster_points": (self.min_cluster_points, 1, 10**9),
+            "seed": (self.seed, 0, 2**31 - 1),
+        }
+        for name, (value, low, high) in checks.items():
+            if not low <= value <= high:
+                raise ConfigError(f"refinement.{name} must be in {low}..{high}, got {value}")
+        if self.up is not None and (len(self.up) != 3 or sum(v * v for v in self.up) < 1e-12):
+            raise ConfigError(f"refinement.up must be a non-zero 3-vector or absent, got {self.up}")

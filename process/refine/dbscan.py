@@ -1,0 +1,275 @@
+"""Step 3: adaptive DBSCAN (paper section 2.4.1 as PAPER.md reads it), on one KD-tree query.
+
+eps_K is the mean distance to the K-th nearest neighbour (KANN), MinPts_K the mean number of
+points within eps_K (the point itself included, never below 4); DBSCAN runs for K = 1, 2, ...
+and the largest K of the first run of >= 3 equal cluster counts is chosen.
+
+DBSCAN is our own, on SciPy's cKDTree, rather than Open3D's `cluster_dbscan`: Open3D searches
+the neighbourhoods again on every call, while here one query of 2 K_max + 1 neighbours per point
+serves every candidate eps (each listed distance is binned once against the sorted eps_K), so
+one DBSCAN costs a few array passes and a SciPy connected-components call. It is exact: a point
+whose whole list lies within eps gets its count from a ball query, and pairs of such points,
+the only edges a list can miss, come from `query_pairs`. Clusters are the connected components
+of core points; a border point joins the cluster of its nearest core point.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+logger = logging.getLogger(__name__)
+
+MIN_PTS_FLOOR = 4  # the paper: MinPts >= 4 for 3-D points
+STABLE_RUN = 3  # KANN-DBSCAN: the cluster count is stable when 3 consecutive K agree
+
+
+@dataclass(frozen=True)
+class KannCurves:
+    """The candidate parameters per K and the cluster count DBSCAN gives with each (Figs. 4-5)."""
+
+    ks: npt.NDArray[np.int64]  # (K,) 1 .. min(k_max, n - 1)
+    eps_m: npt.NDArray[np.float64]  # (K,) mean K-th neighbour distance
+    min_pts: npt.NDArray[np.int64]  # (K,) mean count within eps_K, at least 4
+    n_clusters: npt.NDArray[np.int64]  # (K,) DBSCAN clusters; -1 where DBSCAN was not run
+
+
+@dataclass(frozen=True)
+class DbscanChoice:
+    """The chosen (K, eps, MinPts) and how it was found."""
+
+    k: int
+    eps_m: float
+    min_pts: int
+    stable: bool  # False: no stable run of cluster counts, the fallback chose
+    note: str
+
+
+def query_size(k_max: int) -> int:
+    """Return the neighbours listed per point: twice K_max, so that lists rarely run short."""
+    return 2 * k_max + 1
+
+
+class NeighbourTable:
+    """One KD-tree query of a point set, binned against sorted eps candidates, reused by DBSCAN."""
+
+    def __init__(self, points: npt.NDArray[np.floating], *, k_query: int) -> None:
+        self.points = np.asarray(points, np.float64)
+        self.tree = cKDTree(self.points)
+        n = len(self.points)
+        q = min(n, k_query)
+        dist, idx = self.tree.query(self.points, k=q, workers=-1)
+        self.dist = np.asarray(dist, np.float64).reshape(n, q)  # row-sorted, column 0 = itself
+        self.idx = np.asarray(idx, np.int32).reshape(n, q)
+        self.last = self.dist[:, -1].copy()  # a row within eps up to here may be cut short
+        self.complete = q == n  # every row lists the whole set
+        self.eps = np.zeros(0)
+        self.bins = np.zeros((n, 0), np.uint8)
+        self.col_cut = np.zeros(0, np.int64)
+        self.counts = np.zeros((0, n), np.int32)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def kann_eps(self, k_eff: int) -> npt.NDArray[np.float64]:
+        """Return eps_K for K = 1..k_eff: the mean over points of the K-th neighbour distance."""
+        eps: npt.NDArray[np.float64] = self.dist[:, 1 : k_eff + 1].mean(axis=0)
+        return eps
+
+    def bind(self, eps: npt.NDArray[np.float64]) -> None:
+        """Bin each listed distance against the (ascending) eps values and count neighbours."""
+        n, n_eps = len(self), len(eps)
+        bins = np.searchsorted(eps, self.dist, side="left")  # d <= eps[k]  <=>  bins <= k
+        flat = (np.arange(n)[:, None] * (n_eps + 1) + bins).ravel()
+        hist = np.bincount(flat, minlength=n * (n_eps + 1)).reshape(n, n_eps + 1)
+        counts = np.cumsum(hist, axis=1)[:, :n_eps]
+        if not self.complete:
+            for k in range(n_eps):
+                rows = np.flatnonzero(self.last <= eps[k])
+                if len(rows):
+                    counts[rows, k] = self.tree.query_ball_point(
+                        self.points[rows], eps[k], return_length=True, workers=-1
+                    )
+        self.eps = eps
+        self.bins = bins.astype(np.uint8 if n_eps < 255 else np.uint16)
+        self.col_cut = np.searchsorted(bins.min(axis=0), np.arange(n_eps), side="right")
+        self.counts = np.ascontiguousarray(counts.T, np.int32)  # (n_eps, n): one row per eps
+        del self.dist  # the bins say all DBSCAN needs
+
+    def min_pts(self) -> npt.NDArray[np.int64]:
+        """Return MinPts_k per bound eps: the mean neighbour count rounded half up, at least 4."""
+        mean = self.counts.mean(axis=1)
+        min_pts: npt.NDArray[np.int64] = np.maximum(MIN_PTS_FLOOR, np.floor(mean + 0.5)).astype(
+            np.int64
+        )
+        return min_pts
+
+    def cluster(
+        self, k: int, min_pts: int
+    ) -> tuple[int, npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+        """Run DBSCAN at the k-th bound eps; return the cluster count, components and core mask."""
+        n = len(self)
+        core = self.counts[k] >= min_pts
+        rows = np.flatnonzero(core)
+        cut = int(self.col_cut[k])
+        within = self.bins[rows, :cut] <= k
+        cols = self.idx[rows, :cut][within]
+        starts = np.repeat(rows, np.count_nonzero(within, axis=1))
+        keep = core[cols]
+        starts, cols = starts[keep], cols[keep]
+        extra = self._saturated_pairs(core, k)
+        if extra is not None:
+            starts, cols = np.concatenate([starts, extra[0]]), np.concatenate([cols, extra[1]])
+            order = np.argsort(starts, kind="stable")
+            starts, cols = starts[order], cols[order]
+        # CSR straight from the row-grouped edges, flagged canonical so that SciPy skips sorting
+        # every row by column: connected components need neither sorted rows nor unique edges
+        indptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(starts, minlength=n), out=indptr[1:])
+        graph = csr_matrix((np.ones(len(cols)), cols, indptr), shape=(n, n))
+        graph.has_canonical_format = True
+        n_components, components = connected_components(graph, directed=True, connection="weak")
+        return int(n_components) - (n - len(rows)), components.astype(np.int64), core
+
+    def labels(self, k: int, min_pts: int) -> npt.NDArray[np.int64]:
+        """Return DBSCAN labels at the k-th bound eps: 0..C-1 per cluster, -1 for noise."""
+        _, components, core = self.cluster(k, min_pts)
+        out = np.full(len(self), -1, np.int64)
+        out[core] = np.unique(components[core], return_inverse=True)[1]
+        self._assign_border(out, core, k)
+        return out
+
+    def _saturated_pairs(
+        self, core: npt.NDArray[np.bool_], k: int
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None:
+        """Return the eps-pairs among core points whose lists are cut short (both ends)."""
+        if self.complete:
+            return None
+        full = np.flatnonzero(core & (self.last <= self.eps[k]))
+        if len(full) < 2:
+            return None
+        pairs = cKDTree(self.points[full]).query_pairs(self.eps[k], output_type="ndarray")
+        return full[pairs[:, 0]], full[pairs[:, 1]]
+
+    def _assign_border(
+        self, out: npt.NDArray[np.int64], core: npt.NDArray[np.bool_], k: int
+    ) -> None:
+        """Give each non-core point within eps of a core point the cluster of the nearest one."""
+        border = np.flatnonzero(~core)
+        cut = int(self.col_cut[k])
+        neighbours = self.idx[border, :cut]
+        ok = (self.bins[border, :cut] <= k) & core[neighbours]
+        has = ok.any(axis=1)
+        nearest = neighbours[has, ok[has].argmax(axis=1)]  # rows are sorted by distance
+        out[border[has]] = out[nearest]
+        if self.complete:
+            return
+        # a row that lies wholly within eps may have its nearest core point beyond the list
+        lost = border[~has & (self.last[border] <= self.eps[k])]
+        balls = self.tree.query_ball_point(self.points[lost], self.eps[k])
+        for i, ball in zip(lost, balls, strict=True):
+            found = np.asarray(ball, np.int64)
+            found = found[core[found]]
+            if len(found):
+                gaps = ((self.points[found] - self.points[i]) ** 2).sum(axis=1)
+                out[i] = out[found[np.argmin(gaps)]]
+
+
+def stable_choice(n_clusters: npt.NDArray[np.int64]) -> tuple[int, bool, str]:
+    """Return (index of the chosen K, stable?, note) from the cluster counts of K = 1, 2, ...
+
+    The first run of >= 3 equal, non-zero counts is the stable interval and its largest K is
+    chosen. Fallback when there is none: the largest K of the longest run of non-zero counts
+    (the later run on ties); when no K gives a cluster, the largest K.
+    """
+    runs = _runs(n_clusters)
+    for start, end, value in runs:
+        if value > 0 and end - start + 1 >= STABLE_RUN:
+            return end, True, f"stable: {value} clusters for K={start + 1}..{end + 1}"
+    positive = [r for r in runs if r[2] > 0]
+    if not positive:
+        last = len(n_clusters) - 1
+        return last, False, f"fallback: no K in 1..{last + 1} gives a cluster; chose K={last + 1}"
+    start, end, value = max(positive, key=lambda r: (r[1] - r[0], r[0]))
+    return (
+        end,
+        False,
+        (
+            f"fallback: no {STABLE_RUN} equal cluster counts in K=1..{len(n_clusters)}; chose the "
+            f"largest K of the longest run ({value} clusters for K={start + 1}..{end + 1})"
+        ),
+    )
+
+
+def _runs(values: npt.NDArray[np.int64]) -> list[tuple[int, int, int]]:
+    """Return (first index, last index, value) of each run of equal consecutive values >= 0."""
+    runs: list[tuple[int, int, int]] = []
+    for i, v in enumerate(int(x) for x in values):
+        if v < 0:
+            break
+        if runs and runs[-1][2] == v:
+            runs[-1] = (runs[-1][0], i, v)
+        else:
+            runs.append((i, i, v))
+    return runs
+
+
+def _stable_run_closed(n_clusters: npt.NDArray[np.int64]) -> bool:
+    """Return whether the counts so far hold a stable run followed by a different count."""
+    runs = _runs(n_clusters)
+    return any(v > 0 and e - s + 1 >= STABLE_RUN for s, e, v in runs[:-1])
+
+
+def estimate_parameters(
+    points: npt.NDArray[np.floating], *, k_max: int, full_curves: bool = False
+) -> tuple[NeighbourTable, KannCurves, DbscanChoice]:
+    """Choose (eps, MinPts) by KANN and the stable cluster count; return the table for reuse.
+
+    Without `full_curves`, DBSCAN stops at the first K after the stable run (the rest of the
+    cluster-count curve reads -1).
+    """
+    n = len(points)
+    k_eff = min(k_max, n - 1)
+    if k_eff < 1:
+        raise ValueError(f"adaptive DBSCAN needs at least 2 points, got {n}")
+    table = NeighbourTable(points, k_query=query_size(k_max))
+    eps = table.kann_eps(k_eff)
+    table.bind(eps)
+    min_pts = table.min_pts()
+    n_clusters = np.full(k_eff, -1, np.int64)
+    for k in range(k_eff):
+        n_clusters[k] = table.cluster(k, int(min_pts[k]))[0]
+        if not full_curves and _stable_run_closed(n_clusters[: k + 1]):
+            break
+    index, stable, note = stable_choice(n_clusters)
+    curves = KannCurves(np.arange(1, k_eff + 1), eps, min_pts, n_clusters)
+    return (
+        table,
+        curves,
+        DbscanChoice(index + 1, float(eps[index]), int(min_pts[index]), stable, note),
+    )
+
+
+def adaptive_dbscan(
+    points: npt.NDArray[np.floating], *, k_max: int, full_curves: bool = False
+) -> tuple[npt.NDArray[np.int64], KannCurves, DbscanChoice]:
+    """Return DBSCAN labels (0..C-1, -1 = noise) with adaptive parameters, curves and choice."""
+    table, curves, choice = estimate_parameters(points, k_max=k_max, full_curves=full_curves)
+    return table.labels(choice.k - 1, choice.min_pts), curves, choice
+
+
+def dbscan(
+    points: npt.NDArray[np.floating], *, eps_m: float, min_pts: int, k_query: int
+) -> npt.NDArray[np.int64]:
+    """Return DBSCAN labels (0..C-1, -1 = noise) with fixed parameters (method 1's classes)."""
+    if len(points) == 0:
+        return np.zeros(0, np.int64)
+    table = NeighbourTable(points, k_query=k_query)
+    table.bind(np.array([eps_m]))
+    return table.labels(0, min_pts)

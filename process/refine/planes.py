@@ -1,0 +1,196 @@
+"""Step 1: iterative RANSAC planes, classified as ceiling, floor or wall against gravity."""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from process.refine.config import RefineConfig
+
+logger = logging.getLogger(__name__)
+
+CEILING, FLOOR, WALL = 1, 2, 3  # RECORDING.md label ids
+_PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
+_SNAP_UP_DEG = 30.0  # a given `up` is replaced by the normal of the largest plane this close to it
+
+
+@dataclass(frozen=True)
+class Plane:
+    """One RANSAC plane: model, inliers and what it was classified as."""
+
+    model: npt.NDArray[np.float64]  # (4,) a b c d, unit normal: a x + b y + c z + d = 0
+    indices: npt.NDArray[np.intp]  # RANSAC inliers, indices into the input cloud
+    label: int  # 1 ceiling, 2 floor, 3 wall; 0 = not structural, stays in the object cloud
+    removed: npt.NDArray[np.intp]  # the inliers taken out as structure (connected pieces)
+    height_m: float  # mean height of the removed (else all) inliers along `up`; nan if unknown
+
+
+@dataclass(frozen=True)
+class PlaneSegmentation:
+    """All planes found, the structural label of every input point, and the gravity used."""
+
+    planes: tuple[Plane, ...]
+    labels: npt.NDArray[np.uint8]  # (N,) 1/2/3 on structural planes, 0 elsewhere
+    up: npt.NDArray[np.float64] | None  # (3,) unit gravity-up; None when it could not be found
+    up_source: str  # "argument", "argument snapped to plane", "largest plane" or "none"
+
+    @property
+    def structural(self) -> npt.NDArray[np.bool_]:
+        """Return the mask of points removed from the object cloud (on a structural plane)."""
+        return self.labels > 0
+
+
+def segment_planes(
+    points: npt.NDArray[np.float32],
+    cfg: RefineConfig,
+    *,
+    up: npt.NDArray[np.float64] | None,
+) -> PlaneSegmentation:
+    """Find planes until one has fewer than Min inliers or fewer than Max points remain."""
+    rng = np.random.default_rng(cfg.seed)
+    remaining = np.arange(len(points))
+    found: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]] = []
+    while (
+        len(found) < cfg.max_planes
+        and len(remaining) > cfg.plane_max_remaining
+        and len(remaining) >= cfg.plane_min_points
+    ):
+        model, inliers = _ransac_plane(points[remaining], cfg, rng)
+        if len(inliers) < cfg.plane_min_points:
+            break
+        found.append((model, remaining[inliers]))
+        remaining = np.delete(remaining, inliers)
+    up_used, source = _gravity(points, found, up, cfg)
+    heights = None if up_used is None else points @ up_used.astype(np.float32)
+    planes = tuple(_classify(points, m, idx, heights, up_used, cfg) for m, idx in found)
+    labels = np.zeros(len(points), np.uint8)
+    for plane in planes:
+        labels[plane.removed] = plane.label
+    logger.debug("planes: %s", [(p.label, len(p.indices)) for p in planes])
+    return PlaneSegmentation(planes, labels, up_used, source)
+
+
+def _ransac_plane(
+    points: npt.NDArray[np.float32], cfg: RefineConfig, rng: np.random.Generator
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]:
+    """Return the best plane (Open3D RANSAC on a sample, refit on all inliers) and its inliers."""
+    import open3d as o3d
+
+    sample = points
+    if 0 < cfg.plane_sample_points < len(points):
+        # hypotheses scored on a random subset find the same dominant plane; all points are
+        # then tested against it, so inlier counts are exact
+        sample = points[rng.choice(len(points), cfg.plane_sample_points, replace=False)]
+    o3d.utility.random.seed(int(rng.integers(2**31)))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample.astype(np.float64)))
+    model, _ = cloud.segment_plane(cfg.plane_distance_m, 3, cfg.plane_iterations)
+    model = np.asarray(model, np.float64)
+    inliers = _inliers(points, model, cfg.plane_distance_m)
+    if len(inliers) >= 3:
+        model = _fit_plane(points[inliers])
+        inliers = _inliers(points, model, cfg.plane_distance_m)
+    return model, inliers
+
+
+def _inliers(
+    points: npt.NDArray[np.float32], model: npt.NDArray[np.float64], distance_m: float
+) -> npt.NDArray[np.intp]:
+    distance = np.abs(points @ model[:3].astype(np.float32) + np.float32(model[3]))
+    return np.flatnonzero(distance <= distance_m)
+
+
+def _fit_plane(points: npt.NDArray[np.float32]) -> npt.NDArray[np.float64]:
+    """Return the least-squares plane (smallest principal axis through the centroid)."""
+    centroid = points.mean(axis=0, dtype=np.float64)
+    centred = points - centroid.astype(np.float32)
+    covariance = (centred.T @ centred).astype(np.float64)
+    normal = np.linalg.eigh(covariance)[1][:, 0]
+    return np.append(normal, -normal @ centroid)
+
+
+def _gravity(
+    points: npt.NDArray[np.float32],
+    found: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]],
+    up: npt.NDArray[np.float64] | None,
+    cfg: RefineConfig,
+) -> tuple[npt.NDArray[np.float64] | None, str]:
+    """Return gravity-up: the given one snapped to a near-level plane, else the largest plane's."""
+    if up is None and cfg.up is not None:
+        up = np.asarray(cfg.up, np.float64)
+    if up is not None:
+        up = np.asarray(up, np.float64) / np.linalg.norm(up)
+        # a hand-held first pose is level only to 10-20 degrees; the floor is level exactly
+        snap = math.cos(math.radians(_SNAP_UP_DEG))
+        level = [(len(i), m) for m, i in found if abs(m[:3] @ up) >= snap]
+        if not level:
+            return up, "argument"
+        normal = max(level, key=lambda t: t[0])[1][:3]
+        return normal * np.sign(normal @ up), "argument snapped to plane"
+    if not found:
+        return None, "none"
+    # no gravity given: the largest plane is taken as the floor, facing the bulk of the points
+    model = max(found, key=lambda t: len(t[1]))[0]
+    side = np.median(points @ model[:3].astype(np.float32) + np.float32(model[3]))
+    return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane"
+
+
+def _classify(
+    points: npt.NDArray[np.float32],
+    model: npt.NDArray[np.float64],
+    indices: npt.NDArray[np.intp],
+    heights: npt.NDArray[np.float32] | None,  # (N,) every point's height along up
+    up: npt.NDArray[np.float64] | None,
+    cfg: RefineConfig,
+) -> Plane:
+    """Classify a plane: level and lowest = floor, level and highest = ceiling, upright = wall.
+
+    Only the plane's large connected pieces count: RANSAC's infinite plane also takes the
+    coplanar faces of furniture far from the wall or floor, which must stay objects.
+    """
+    none = np.zeros(0, np.intp)
+    if up is None or heights is None:
+        return Plane(model, indices, 0, none, math.nan)
+    cosine = abs(float(model[:3] @ up))
+    tolerance = math.radians(cfg.horizontal_tolerance_deg)
+    level, upright = cosine >= math.cos(tolerance), cosine <= math.sin(tolerance)
+    pieces = _large_pieces(points[indices], model, cfg) if level or upright else None
+    if pieces is None or int(pieces.sum()) < cfg.plane_min_points:
+        return Plane(model, indices, 0, none, float(heights[indices].mean()))
+    kept = indices[pieces]
+    height = float(heights[kept].mean())
+    low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
+    label = 0
+    if level and height - low <= cfg.structure_height_tol_m:
+        label = FLOOR
+    elif level and high - height <= cfg.structure_height_tol_m:
+        label = CEILING
+    elif upright and float(np.percentile(heights[kept], 99.0)) - low >= cfg.wall_min_height_m:
+        label = WALL  # upright and rising well above the floor: chair backs and desk sides do not
+    return Plane(model, indices, label, kept if label else none, height)
+
+
+def _large_pieces(
+    points: npt.NDArray[np.float32], model: npt.NDArray[np.float64], cfg: RefineConfig
+) -> npt.NDArray[np.bool_]:
+    """Return the inliers in the largest connected piece, or in any piece of >= Min points."""
+    from scipy import ndimage
+
+    normal = model[:3]
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    uv = points @ np.stack([u, np.cross(normal, u)], axis=1).astype(np.float32)
+    extent = float((uv.max(axis=0) - uv.min(axis=0)).max()) if len(uv) else 0.0
+    cell = max(_PIECE_CELL_M, extent / 2000)  # bounded grid for stray far inliers
+    ij = ((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    grid = np.zeros(tuple(ij.max(axis=0) + 1), bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    pieces, _ = ndimage.label(grid, structure=np.ones((3, 3), bool))
+    piece = pieces[ij[:, 0], ij[:, 1]]
+    sizes = np.bincount(piece)
+    big = (sizes >= cfg.plane_min_points) | (np.arange(len(sizes)) == sizes.argmax())
+    kept: npt.NDArray[np.bool_] = big[piece]
+    return kept

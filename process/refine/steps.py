@@ -1,0 +1,199 @@
+"""The refinement as a table of contents: planes -> SOR -> adaptive DBSCAN -> regrowth."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from process.cloud import LabelledCloud
+from process.refine.config import RefineConfig
+from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
+from process.refine.outliers import sor_inliers
+from process.refine.planes import PlaneSegmentation, segment_planes
+from process.refine.regrowth import regrow
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ClassClustering:
+    """What adaptive DBSCAN did to one class (a row of the paper's Tables 1 and 8)."""
+
+    label: int  # the class; 0 for method 1's estimate over all labelled points
+    points: int
+    curves: KannCurves | None  # None: too few points, or method 1's class (see the shared one)
+    choice: DbscanChoice | None  # None: fewer points than a cluster needs, all set to 0
+    clusters: int  # clusters kept
+    relabelled: int  # points set to 0 (noise and small clusters)
+    seconds_params: float
+    seconds_cluster: float
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """Every step's output; arrays of length N follow the input cloud's order."""
+
+    fused: LabelledCloud  # the input (phase I)
+    planes: PlaneSegmentation
+    sor_outliers: npt.NDArray[np.intp]  # input indices that SOR removed
+    method: int
+    dbscan: dict[int, ClassClustering]  # per class label
+    shared: ClassClustering | None  # method 1: the one estimate for all classes
+    labels_ii: npt.NDArray[np.uint8]  # (N,) after DBSCAN; plane labels on planes, 0 if removed
+    clusters_ii: npt.NDArray[np.int32]  # (N,)
+    labels_iii: npt.NDArray[np.uint8]  # (N,) after regrowth
+    clusters_iii: npt.NDArray[np.int32]  # (N,)
+    regrown: npt.NDArray[np.intp]  # input indices that regrowth labelled
+    r2_m: dict[int, float] = field(default_factory=dict)  # cluster id -> regrowth r2
+    seconds: dict[str, float] = field(default_factory=dict)  # step -> wall time
+
+    @property
+    def kept(self) -> npt.NDArray[np.bool_]:
+        """Return the mask of input points that survive (all but SOR outliers)."""
+        keep = np.ones(len(self.fused), bool)
+        keep[self.sor_outliers] = False
+        return keep
+
+    def final(self) -> LabelledCloud:
+        """Return the refined map: every surviving point at its input position, final labels."""
+        cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
+        return cloud.select(self.kept)
+
+    def phase_clouds(self) -> dict[str, LabelledCloud]:
+        """Return the input points labelled as phases I, II, III (removed points: label 0)."""
+        return {
+            "I": self.fused,
+            "II": self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii),
+            "III": self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii),
+        }
+
+    def plane_cloud(self) -> LabelledCloud:
+        """Return the points on structural planes, labelled ceiling, floor or wall."""
+        structural = self.planes.structural
+        return self.fused.with_labels(self.planes.labels).select(structural)
+
+    def outlier_cloud(self) -> LabelledCloud:
+        """Return the points SOR removed, with their input labels."""
+        return self.fused.select(self.sor_outliers)
+
+    def cluster_cloud(self) -> LabelledCloud:
+        """Return the object points DBSCAN kept, with their class and cluster."""
+        keep = (self.clusters_ii > 0) & ~self.planes.structural
+        return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
+
+    def regrown_cloud(self) -> LabelledCloud:
+        """Return the points regrowth labelled, with their new class and cluster."""
+        cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
+        return cloud.select(self.regrown)
+
+
+def refine(
+    cloud: LabelledCloud, cfg: RefineConfig, *, up: npt.NDArray[np.float64] | None = None
+) -> RefineResult:
+    """Refine a fused labelled cloud; `up` (gravity-up in the cloud's frame) overrides cfg.up."""
+    seconds: dict[str, float] = {}
+    start = tick = time.perf_counter()
+
+    def lap(step: str) -> None:
+        nonlocal tick
+        now = time.perf_counter()
+        seconds[step], tick = now - tick, now
+
+    planes = segment_planes(cloud.points, cfg, up=up)
+    lap("planes")
+    objects = np.flatnonzero(~planes.structural)
+    keep = sor_inliers(
+        cloud.points[objects], nb_neighbors=cfg.sor_nb_neighbors, std_ratio=cfg.sor_std_ratio
+    )
+    outliers, objects = objects[~keep], objects[keep]
+    lap("sor")
+    points = cloud.points[objects]
+    labels, clusters, per_class, shared = _correct(points, cloud.labels[objects], cfg)
+    lap("dbscan")
+    labels_ii = np.where(planes.structural, planes.labels, 0).astype(np.uint8)
+    clusters_ii = np.zeros(len(cloud), np.int32)
+    labels_ii[objects], clusters_ii[objects] = labels, clusters
+    labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
+    regrown, r2 = np.zeros(0, np.intp), {}
+    if cfg.regrowth:
+        r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
+        grown = regrow(points, labels, clusters, r1_m=r1)
+        labels_iii[objects], clusters_iii[objects] = grown.labels, grown.clusters
+        regrown, r2 = objects[grown.regrown], grown.r2_m
+    lap("regrowth")
+    seconds["total"] = time.perf_counter() - start
+    logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
+    return RefineResult(
+        cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
+        labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds,
+    )  # fmt: skip
+
+
+def _correct(
+    points: npt.NDArray[np.float32], labels: npt.NDArray[np.uint8], cfg: RefineConfig
+) -> tuple[
+    npt.NDArray[np.uint8], npt.NDArray[np.int32], dict[int, ClassClustering], ClassClustering | None
+]:
+    """Cluster each class; keep clusters of at least min_cluster_points, set the rest to 0."""
+    out_labels = np.zeros(len(points), np.uint8)
+    out_clusters = np.zeros(len(points), np.int32)
+    shared = _shared_estimate(points, labels, cfg) if cfg.dbscan_method == 1 else None
+    per_class: dict[int, ClassClustering] = {}
+    next_id = 1
+    for label in (int(c) for c in np.unique(labels) if c > 0):
+        members = np.flatnonzero(labels == label)
+        entry, cluster_of = _cluster_class(label, points[members], cfg, shared)
+        sizes = np.bincount(cluster_of[cluster_of >= 0], minlength=1)
+        big = np.flatnonzero(sizes >= cfg.min_cluster_points)
+        new_id = np.zeros(len(sizes) + 1, np.int32)  # index 0 takes noise (-1)
+        new_id[big + 1] = np.arange(next_id, next_id + len(big))
+        ids = new_id[cluster_of + 1]
+        out_clusters[members] = ids
+        out_labels[members[ids > 0]] = label
+        next_id += len(big)
+        per_class[label] = replace(entry, clusters=len(big), relabelled=int((ids == 0).sum()))
+    return out_labels, out_clusters, per_class, shared
+
+
+def _cluster_class(
+    label: int, points: npt.NDArray[np.float32], cfg: RefineConfig, shared: ClassClustering | None
+) -> tuple[ClassClustering, npt.NDArray[np.int64]]:
+    """Return the clustering entry of one class and its DBSCAN labels (all -1: too small)."""
+    entry = ClassClustering(label, len(points), None, None, 0, 0, 0.0, 0.0)
+    noise = np.full(len(points), -1, np.int64)
+    if len(points) < max(cfg.min_cluster_points, 2):
+        return entry, noise  # no cluster of this class can reach the size threshold
+    t0 = time.perf_counter()
+    if shared is None:
+        table, curves, choice = estimate_parameters(
+            points, k_max=cfg.k_max, full_curves=cfg.full_curves
+        )
+        t1 = time.perf_counter()
+        cluster_of = table.labels(choice.k - 1, choice.min_pts)
+        seconds = time.perf_counter() - t1
+        return replace(
+            entry, curves=curves, choice=choice, seconds_params=t1 - t0, seconds_cluster=seconds
+        ), cluster_of
+    if shared.choice is None:
+        return entry, noise
+    choice = shared.choice
+    cluster_of = dbscan(
+        points, eps_m=choice.eps_m, min_pts=choice.min_pts, k_query=query_size(cfg.k_max)
+    )
+    return replace(entry, choice=choice, seconds_cluster=time.perf_counter() - t0), cluster_of
+
+
+def _shared_estimate(
+    points: npt.NDArray[np.float32], labels: npt.NDArray[np.uint8], cfg: RefineConfig
+) -> ClassClustering:
+    """Return method 1's single (eps, MinPts), estimated over every labelled object point."""
+    labelled = points[labels > 0]
+    t0 = time.perf_counter()
+    if len(labelled) < 2:
+        return ClassClustering(0, len(labelled), None, None, 0, 0, 0.0, 0.0)
+    _, curves, choice = estimate_parameters(labelled, k_max=cfg.k_max, full_curves=cfg.full_curves)
+    return ClassClustering(0, len(labelled), curves, choice, 0, 0, time.perf_counter() - t0, 0.0)
