@@ -7,6 +7,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import datetime
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, Protocol
@@ -130,7 +131,7 @@ def capture_record(source: str, settings: dict[str, object]) -> dict[str, object
         "source": source,
         "config": settings,
         "host": socket.gethostname(),
-        "start_time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "start_time": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
 
 

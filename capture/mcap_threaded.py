@@ -15,6 +15,7 @@ import time
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from datetime import datetime
 from types import FrameType
 from typing import Final
 
@@ -208,7 +209,7 @@ class ThreadedWriter:
             "frames_dropped": stats.dropped,
             "dropped_by_camera": stats.dropped_by_camera,
             "dropped_by_queue": stats.dropped_by_queue,
-            "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "finished_at": datetime.now().astimezone().isoformat(timespec="seconds"),
         }
 
 
