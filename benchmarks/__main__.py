@@ -7,6 +7,7 @@ import pkgutil
 import sys
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 import benchmarks
@@ -28,7 +29,7 @@ def main(selected: list[str]) -> int:
         table.add_column(col)
     for r in rows:
         table.add_row(
-            r.area, f"{r.metric} [{r.unit}]", f"{r.ours:.4g}", f"{r.reference:.4g}", f"{r.ratio:.2f}x", r.goal, r.source
+            r.area, escape(f"{r.metric} [{r.unit}]"), f"{r.ours:.4g}", f"{r.reference:.4g}", f"{r.ratio:.2f}x", r.goal, r.source
         )
     Console(width=200).print(table)
     return 0

@@ -68,6 +68,8 @@ class RecordingWriter:
         self.jpeg_quality = jpeg_quality
         self._interval_ns = int(chunk_interval_s * 1e9)
         try:
+            if stream is None:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
             self._stream: IO[bytes] = self.path.open("wb") if stream is None else stream
         except OSError as err:
             raise RecordingError(f"cannot create recording: {err.strerror}: {self.path}") from err

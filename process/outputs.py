@@ -65,7 +65,7 @@ def summary_table(metrics: Mapping[str, Any]) -> Table:
     table.add_column("figure")
     table.add_column("value", justify="right")
     for stage, seconds in metrics.get("seconds", {}).items():
-        table.add_row(stage, "time [s]", f"{seconds:.2f}")
+        table.add_row(stage, "time (s)", f"{seconds:.2f}")
     odo = metrics.get("odometry", {})
     for key in ("frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"):
         if odo.get(key) is not None:
@@ -78,7 +78,11 @@ def summary_table(metrics: Mapping[str, Any]) -> Table:
     for phase, per_class in phases.items():
         overall = per_class.get("all", {})
         if overall:
-            figures = ", ".join(f"{k} {overall[k]:.3f}" for k in ("iou", "precision", "recall", "f1") if k in overall)
+            figures = ", ".join(
+                f"{k} {overall[k]:.3f}"
+                for k in ("iou", "precision", "recall", "f1")
+                if k in overall
+            )
             table.add_row("refinement", f"phase {phase} (all)", figures)
     return table
 

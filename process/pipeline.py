@@ -69,7 +69,9 @@ class ReplayPipeline:
         self._write_config()
         with RecordingReader(self.recording) as rec:
             if not rec.has_ground_truth:
-                self.viz.log_text("recording has no ground truth: metrics against it are skipped", level="INFO")
+                self.viz.log_text(
+                    "recording has no ground truth: metrics against it are skipped", level="INFO"
+                )
                 logger.info("no ground truth in %s: metrics against it are skipped", self.recording)
             trajectory, gt_poses = self._replay_frames(rec)
             gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
@@ -88,7 +90,9 @@ class ReplayPipeline:
         return self.result
 
     # -- per frame ---------------------------------------------------------------------------
-    def _replay_frames(self, rec: RecordingReader) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
+    def _replay_frames(
+        self, rec: RecordingReader
+    ) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
         depth = DepthProcessor(self.cfg.depth)
         odometry: Odometry | None = None
         segmenter = self._make_segmenter() if "segmentation" in self.stages else None
@@ -99,7 +103,11 @@ class ReplayPipeline:
         gt_poses: list[tuple[int, Any]] = []
         self._seg_stats = _SegStats()
         frames = tqdm(
-            rec.frames(), total=len(rec), unit="frame", dynamic_ncols=True, disable=not self.progress
+            rec.frames(),
+            total=len(rec),
+            unit="frame",
+            dynamic_ncols=True,
+            disable=not self.progress,
         )
         for frame in frames:
             if odometry is None:
@@ -133,8 +141,6 @@ class ReplayPipeline:
         self.viz.log_pose(track.world_from_camera, keyframe=track.is_keyframe)
         self.viz.log_keypoints(track.keypoints_xy, inliers=track.inlier_mask)
         self.viz.log_tracking(track.n_inliers, status=track.status, event=track.event)
-        if track.event:
-            self.viz.log_text(track.event, level="WARN" if track.status != "ok" else "INFO")
 
     def _make_segmenter(self) -> Any:
         from process.segmentation import Segmenter
@@ -142,7 +148,11 @@ class ReplayPipeline:
         return Segmenter(self.cfg.segmentation, weights=self.weights, device=self.device)
 
     def _keyframe(
-        self, frame: RgbdFrame, depth_m: npt.NDArray[np.float32], world_from_camera: Any, segmenter: Any
+        self,
+        frame: RgbdFrame,
+        depth_m: npt.NDArray[np.float32],
+        world_from_camera: Any,
+        segmenter: Any,
     ) -> None:
         seg = self._timed("segmentation", lambda: segmenter.segment(frame.color))
         self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
@@ -164,13 +174,17 @@ class ReplayPipeline:
             )
 
     # -- after the frames ----------------------------------------------------------------
-    def _finish_odometry(self, trajectory: list[tuple[int, Any]], gt_poses: list[tuple[int, Any]]) -> None:
+    def _finish_odometry(
+        self, trajectory: list[tuple[int, Any]], gt_poses: list[tuple[int, Any]]
+    ) -> None:
         stamps = [s for s, _ in trajectory]
         poses = [p for _, p in trajectory]
         path = self.out_dir / outputs.TRAJECTORY
         write_tum(path, stamps, poses)
         self.result.written.append(path)
-        self.viz.log_trajectory("estimated", np.array(stamps, np.int64), np.array([p[:3, 3] for p in poses]))
+        self.viz.log_trajectory(
+            "estimated", np.array(stamps, np.int64), np.array([p[:3, 3] for p in poses])
+        )
         seconds = self._seconds.get("odometry", 0.0) + self._seconds.get("depth", 0.0)
         odo: dict[str, Any] = {
             "frames": self._frames,
@@ -179,7 +193,9 @@ class ReplayPipeline:
         }
         if gt_poses:
             gt_stamps = np.array([s for s, _ in gt_poses], np.int64)
-            self.viz.log_trajectory("ground_truth", gt_stamps, np.array([p[:3, 3] for _, p in gt_poses]))
+            self.viz.log_trajectory(
+                "ground_truth", gt_stamps, np.array([p[:3, 3] for _, p in gt_poses])
+            )
             est = (np.array(stamps, np.int64), np.array(poses))
             ref = (gt_stamps, np.array([p for _, p in gt_poses]))
             odo["ate_rmse_m"] = ate_rmse(est, ref)
@@ -188,7 +204,9 @@ class ReplayPipeline:
             self.viz.log_metrics("odometry", {k: v for k, v in odo.items() if isinstance(v, float)})
         self.result.metrics["odometry"] = odo
         if "segmentation" in self.stages:
-            self.result.metrics["segmentation"] = self._seg_stats.summary(self._seconds.get("segmentation", 0.0))
+            self.result.metrics["segmentation"] = self._seg_stats.summary(
+                self._seconds.get("segmentation", 0.0)
+            )
 
     def _write_cloud(self, name: str, cloud: Any) -> None:
         from process.cloud import write_ply
@@ -233,7 +251,9 @@ class _SegStats:
     def summary(self, seconds: float) -> dict[str, Any]:
         out: dict[str, Any] = {
             "keyframes": self.keyframes,
-            "ms_per_keyframe": round(1000 * seconds / self.keyframes, 2) if self.keyframes else None,
+            "ms_per_keyframe": round(1000 * seconds / self.keyframes, 2)
+            if self.keyframes
+            else None,
         }
         if self.confusion.sum() == 0:
             return out
