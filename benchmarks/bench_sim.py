@@ -91,7 +91,7 @@ def _noise_spread_mm(depth_m: float) -> tuple[float, float]:
     lights = np.array([[0.0, 0.0, 0.0]])
     scene = Scene(0, (40.0, 40.0, 40.0), (part,), {1: "wall"}, lights, LoopPath((0, 0), (1, 1)))
     rig = d435_rig()
-    view: DepthView = Renderer(scene).render_depth(np.eye(4), rig.depth)
+    view: DepthView = Renderer(scene).render_depth(np.eye(4), intrinsics=rig.depth)
     model = D435DepthModel()
     depth_mm = model.apply(view, focal_px=rig.depth.fx, rng=np.random.default_rng(0))
     valid = depth_mm[depth_mm > 0].astype(np.float64)

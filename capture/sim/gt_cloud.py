@@ -44,7 +44,7 @@ class LabelledPoints:
 
 
 def sample_scene(
-    scene: Scene, renderer: Renderer, *, spacing_m: float = 0.02, seed: int = 0
+    scene: Scene, *, renderer: Renderer, spacing_m: float = 0.02, seed: int = 0
 ) -> LabelledPoints:
     """Sample every part's surface uniformly at about one point per spacing_m^2.
 
@@ -70,7 +70,7 @@ def sample_scene(
     points = _points(scene, triangle, uv)
     inside = np.all(np.abs(points[:, :2]) <= np.asarray(scene.room_m[:2]) / 2 + 1e-5, axis=1)
     inside &= (points[:, 2] >= -1e-5) & (points[:, 2] <= scene.room_m[2] + 1e-5)
-    colors = renderer.surface_color(triangle, uv)
+    colors = renderer.surface_color(triangle, barycentric=uv)
     return LabelledPoints(
         points[inside].astype(np.float32),
         colors[inside],

@@ -153,19 +153,21 @@ class Renderer:
         uvs, normals = out["primitive_uvs"].numpy(), out["primitive_normals"].numpy()
         return _Hits(depth, geometry, triangle, uvs, normals, rays[:, 3:])
 
-    def render_color(self, world_from_camera: npt.NDArray[np.float64], k: Intrinsics) -> ColorView:
+    def render_color(
+        self, world_from_camera: npt.NDArray[np.float64], *, intrinsics: Intrinsics
+    ) -> ColorView:
         """Render colour with exact labels, instances and z-depth in the colour camera."""
-        hits = self._cast(world_from_camera, k)
-        shape = (k.height, k.width)
+        hits = self._cast(world_from_camera, intrinsics)
+        shape = (intrinsics.height, intrinsics.width)
         return ColorView(
-            self.surface_color(hits.triangle, hits.barycentric).reshape(*shape, 3),
+            self.surface_color(hits.triangle, barycentric=hits.barycentric).reshape(*shape, 3),
             self._label[hits.geometry].reshape(shape),
             self._instance[hits.geometry].reshape(shape),
             hits.depth_m.reshape(shape),
         )
 
     def surface_color(
-        self, triangle: npt.NDArray[np.uint32], barycentric: npt.NDArray[np.float32]
+        self, triangle: npt.NDArray[np.uint32], *, barycentric: npt.NDArray[np.float32]
     ) -> npt.NDArray[np.uint8]:
         """Return the shaded colour (N, 3) at points given by triangle row and Embree (u, v)."""
         row = self._tables[triangle]  # (N, 10): u, du1, du2, v, dv1, dv2, s, ds1, ds2, base
@@ -182,11 +184,16 @@ class Renderer:
         """Return the first triangle row of each part (len(parts) + 1,), for `surface_color`."""
         return self._offsets
 
-    def render_depth(self, world_from_depth: npt.NDArray[np.float64], k: Intrinsics) -> DepthView:
+    def render_depth(
+        self, world_from_depth: npt.NDArray[np.float64], *, intrinsics: Intrinsics
+    ) -> DepthView:
         """Render what the depth camera's noise model needs: z-depth, incidence, albedo, gloss."""
-        hits = self._cast(world_from_depth, k)
-        shape = (k.height, k.width)
-        cos = np.abs(np.einsum("ij,ij->i", hits.normal, hits.direction)) * self._directions(k)[1]
+        hits = self._cast(world_from_depth, intrinsics)
+        shape = (intrinsics.height, intrinsics.width)
+        cos = (
+            np.abs(np.einsum("ij,ij->i", hits.normal, hits.direction))
+            * self._directions(intrinsics)[1]
+        )
         return DepthView(
             hits.depth_m.reshape(shape),
             cos.reshape(shape),
@@ -195,10 +202,11 @@ class Renderer:
         )
 
     def depth_image(
-        self, world_from_camera: npt.NDArray[np.float64], k: Intrinsics
+        self, world_from_camera: npt.NDArray[np.float64], *, intrinsics: Intrinsics
     ) -> npt.NDArray[np.float32]:
         """Return the exact z-depth (H, W) metres seen by any pinhole camera, 0 = no hit."""
-        return self._cast(world_from_camera, k).depth_m.reshape(k.height, k.width)
+        depth = self._cast(world_from_camera, intrinsics).depth_m
+        return depth.reshape(intrinsics.height, intrinsics.width)
 
 
 def _triangle_tables(

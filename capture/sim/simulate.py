@@ -90,8 +90,12 @@ class FrameSimulator:
     ) -> tuple[Future[ColorView], Future[DepthView]]:
         world_from_depth = world_from_color @ self._color_from_depth
         return (
-            self._pool.submit(self.renderer.render_color, world_from_color, self.rig.color),
-            self._pool.submit(self.renderer.render_depth, world_from_depth, self.rig.depth),
+            self._pool.submit(
+                self.renderer.render_color, world_from_color, intrinsics=self.rig.color
+            ),
+            self._pool.submit(
+                self.renderer.render_depth, world_from_depth, intrinsics=self.rig.depth
+            ),
         )
 
     def _finish(self, view: ColorView, depth_view: DepthView) -> SimFrame:
@@ -141,7 +145,7 @@ def _write(
     """Write the recording; return the number of ground-truth cloud points."""
     trajectory = handheld_loop(sim.scene, frames=frames, fps=fps, seed=seed)
     stamps = [int(s) for s in trajectory.stamps_ns]
-    cloud = sample_scene(sim.scene, sim.renderer, spacing_m=GT_CLOUD_SPACING_M, seed=seed)
+    cloud = sample_scene(sim.scene, renderer=sim.renderer, spacing_m=GT_CLOUD_SPACING_M, seed=seed)
     config = {
         "seed": seed,
         "frames": frames,

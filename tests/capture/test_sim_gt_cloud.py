@@ -11,7 +11,7 @@ from capture.sim.gt_cloud import MIN_POINTS_PER_PART
 
 def test_points_lie_on_the_surfaces_with_the_labels_of_their_parts() -> None:
     scene = build_scene(8)
-    cloud = sample_scene(scene, Renderer(scene), spacing_m=0.05, seed=8)
+    cloud = sample_scene(scene, renderer=Renderer(scene), spacing_m=0.05, seed=8)
     label_of = {p.instance: p.label for p in scene.parts}
     np.testing.assert_array_equal(cloud.labels, [label_of[int(i)] for i in cloud.instances])
     pick = np.random.default_rng(0).choice(len(cloud.labels), 5000, replace=False)
@@ -24,8 +24,8 @@ def test_points_lie_on_the_surfaces_with_the_labels_of_their_parts() -> None:
 def test_density_follows_the_spacing_and_small_parts_are_kept() -> None:
     scene = build_scene(8)
     renderer = Renderer(scene)
-    coarse = sample_scene(scene, renderer, spacing_m=0.1, seed=1)
-    fine = sample_scene(scene, renderer, spacing_m=0.05, seed=1)
+    coarse = sample_scene(scene, renderer=renderer, spacing_m=0.1, seed=1)
+    fine = sample_scene(scene, renderer=renderer, spacing_m=0.05, seed=1)
     floor_coarse = np.sum(coarse.labels == 2)
     floor_fine = np.sum(fine.labels == 2)
     assert 3.8 < floor_fine / floor_coarse < 4.2  # a quarter of the area per point
@@ -36,7 +36,7 @@ def test_density_follows_the_spacing_and_small_parts_are_kept() -> None:
 
 def test_ply_round_trip_keeps_every_field() -> None:
     scene = build_scene(8)
-    cloud = sample_scene(scene, Renderer(scene), spacing_m=0.2, seed=2)
+    cloud = sample_scene(scene, renderer=Renderer(scene), spacing_m=0.2, seed=2)
     data = read_ply(ply_bytes(cloud))
     np.testing.assert_array_equal(np.stack([data["x"], data["y"], data["z"]], 1), cloud.points_m)
     np.testing.assert_array_equal(

@@ -25,7 +25,7 @@ from capture.sim.trajectory import handheld_loop, look_rotation
 @pytest.mark.parametrize("distance_m", [0.5, 1.0, 3.7])
 def test_fronto_parallel_plane_renders_its_distance(distance_m: float) -> None:
     renderer = Renderer(scene_of([wall_at(distance_m)]))
-    depth = renderer.depth_image(np.eye(4), SMALL_K)
+    depth = renderer.depth_image(np.eye(4), intrinsics=SMALL_K)
     np.testing.assert_allclose(depth, distance_m, rtol=1e-6)
 
 
@@ -41,7 +41,7 @@ def test_slanted_plane_depth_matches_ray_plane_intersection() -> None:
     tilt[2, 3] = 2.0
     plane = wall_at(0.0)
     slanted = type(plane)(plane.mesh.transformed(tilt), plane.material, 3, 1)
-    depth = Renderer(scene_of([slanted])).depth_image(np.eye(4), SMALL_K)
+    depth = Renderer(scene_of([slanted])).depth_image(np.eye(4), intrinsics=SMALL_K)
     x = (np.arange(SMALL_K.width) - SMALL_K.cx) / SMALL_K.fx
     np.testing.assert_allclose(depth, np.broadcast_to(2.0 / (1 - 0.5 * x), depth.shape), rtol=1e-5)
 
@@ -52,7 +52,7 @@ def test_labels_and_instances_are_those_of_the_part_hit() -> None:
         box_part((0.4, 0.4, 0.4), (-0.5, 0.0, 2.0), label=5, instance=7),
         box_part((0.4, 0.4, 0.4), (0.5, 0.0, 2.0), label=9, instance=8),
     ]
-    view = Renderer(scene_of(parts)).render_color(np.eye(4), SMALL_K)
+    view = Renderer(scene_of(parts)).render_color(np.eye(4), intrinsics=SMALL_K)
 
     def pixel(x: float, z: float) -> tuple[int, int]:
         return round(SMALL_K.cy), round(SMALL_K.cx + SMALL_K.fx * x / z)
@@ -67,7 +67,7 @@ def test_label_image_agrees_with_instances_in_a_furnished_room() -> None:
     scene = build_scene(4)
     label_of = {p.instance: p.label for p in scene.parts}
     pose = handheld_loop(scene, frames=2, fps=30.0, seed=4).world_from_camera[0]
-    view = Renderer(scene).render_color(pose, d435_rig(160, 120).color)
+    view = Renderer(scene).render_color(pose, intrinsics=d435_rig(160, 120).color)
     expected = np.vectorize(label_of.__getitem__)(view.instances)
     np.testing.assert_array_equal(view.labels, expected)
     assert view.instances.min() > 0  # a closed room: every ray hits something
@@ -97,7 +97,7 @@ def test_surfaces_face_the_camera_and_are_lit() -> None:
     pose[:3, :3] = look_rotation([1.0, 0.3, -0.2])
     pose[:3, 3] = [0.0, 0.0, 1.5]
     k = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
-    view = Renderer(scene).render_color(pose, k)
+    view = Renderer(scene).render_color(pose, intrinsics=k)
     assert view.color.mean() > 60  # ambient + Lambert light, not black
 
 
@@ -106,7 +106,7 @@ def test_textures_give_orb_corners() -> None:
 
     scene = build_scene(1)
     pose = handheld_loop(scene, frames=300, fps=30.0, seed=1).world_from_camera[100]
-    view = Renderer(scene).render_color(pose, d435_rig().color)
+    view = Renderer(scene).render_color(pose, intrinsics=d435_rig().color)
     gray = cv2.cvtColor(view.color, cv2.COLOR_RGB2GRAY)
     keypoints = cv2.ORB.create(nfeatures=1000).detect(gray, None)
     assert len(keypoints) >= 500
@@ -117,7 +117,7 @@ def test_bright_white_surfaces_saturate_instead_of_wrapping() -> None:
     plane = plane_grid((-1.0, -1.0, 1.0), (0.0, 2.0, 0.0), (2.0, 0.0, 0.0), cell_m=0.05)
     scene = scene_of([PlacedPart(plane, white, 3, 1)])
     lit = Scene(0, scene.room_m, scene.parts, scene.instance_names, np.zeros((1, 3)), scene.path)
-    color = Renderer(lit).render_color(np.eye(4), SMALL_K).color
+    color = Renderer(lit).render_color(np.eye(4), intrinsics=SMALL_K).color
     # Ambient 0.45 + Lambert 0.6 > 1 head-on: clipped to white, never wrapped around to dark.
     assert color[20:40, 30:50].min() >= 250
 
