@@ -83,6 +83,29 @@ def handheld_loop(
     rng = np.random.default_rng([seed, 7])
     t_s = np.arange(frames) / fps
     duration_s = max(frames / fps, 1e-6)
+    xy, inward = _walk(scene, rng, t_s, duration_s=duration_s, max_speed_m_s=max_speed_m_s)
+    eye = rng.uniform(1.35, 1.6) + 0.008 * np.sin(2 * np.pi * 1.8 * t_s)  # walking bob
+    position = np.column_stack([xy, eye]) + 0.004 * _shake(rng, t_s, 3)
+    forward = _look(rng, inward, 2 * np.pi * t_s / duration_s, cycles=max(1, round(duration_s / 8)))
+    shake = np.deg2rad(0.5) * _shake(rng, t_s, 3)
+    poses = np.tile(np.eye(4), (frames, 1, 1))
+    for i in range(frames):
+        poses[i, :3, :3] = look_rotation(forward[i], roll_rad=shake[i, 2]) @ _rotation_vector(
+            np.array([shake[i, 0], shake[i, 1], 0.0])
+        )
+        poses[i, :3, 3] = position[i]
+    return Trajectory(frame_stamps_ns(frames, fps), poses)
+
+
+def _walk(
+    scene: Scene,
+    rng: np.random.Generator,
+    t_s: npt.NDArray[np.float64],
+    *,
+    duration_s: float,
+    max_speed_m_s: float,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Return floor positions (N, 2) along the loop and the inward directions (N, 2) there."""
     loop_xy, arc = _arc_lookup(scene)
     perimeter = arc[-1]
     start = rng.uniform(0, perimeter)
@@ -100,23 +123,24 @@ def handheld_loop(
     )
     center = np.asarray(scene.path.center_m)
     inward = (center - xy) / np.linalg.norm(center - xy, axis=1, keepdims=True)
-    xy = xy + lane[:, None] * inward
-    eye = rng.uniform(1.35, 1.6) + 0.008 * np.sin(2 * np.pi * 1.8 * t_s)
-    position = np.column_stack([xy, eye]) + 0.004 * _shake(rng, t_s, 3)
-    # Look inwards with a slow sway, periodic over the recording (the end looks like the start).
-    cycles = max(1, round(duration_s / 8.0))
+    return xy + lane[:, None] * inward, inward
+
+
+def _look(
+    rng: np.random.Generator,
+    inward: npt.NDArray[np.float64],
+    phase: npt.NDArray[np.float64],
+    *,
+    cycles: int,
+) -> npt.NDArray[np.float64]:
+    """Return view directions (N, 3): inwards, slightly down, with a slow periodic sway.
+
+    The sway makes whole cycles over the recording, so the end looks where the start looked.
+    """
     yaw = np.arctan2(inward[:, 1], inward[:, 0]) + rng.uniform(0.5, 0.8) * np.sin(
         cycles * phase + rng.uniform(0, 2 * np.pi)
     )
     pitch = -rng.uniform(0.15, 0.3) + 0.08 * np.sin(cycles * phase + rng.uniform(0, 2 * np.pi))
-    forward = np.column_stack(
+    return np.column_stack(
         [np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)]
     )
-    shake = np.deg2rad(0.5) * _shake(rng, t_s, 3)
-    poses = np.tile(np.eye(4), (frames, 1, 1))
-    for i in range(frames):
-        poses[i, :3, :3] = look_rotation(forward[i], roll_rad=shake[i, 2]) @ _rotation_vector(
-            np.array([shake[i, 0], shake[i, 1], 0.0])
-        )
-        poses[i, :3, 3] = position[i]
-    return Trajectory(frame_stamps_ns(frames, fps), poses)
