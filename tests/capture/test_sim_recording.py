@@ -93,3 +93,15 @@ def test_another_seed_gives_another_room(small_recording: Path, tmp_path: Path) 
     other = tmp_path / "other.mcap"
     simulate_recording(other, seed=6, frames=1, width=W, height=H)
     assert read_all(other)[0].color.tobytes() != read_all(small_recording)[0].color.tobytes()
+
+
+def test_pipelined_frames_equal_frames_rendered_one_by_one() -> None:
+    from capture.sim import FrameSimulator, handheld_loop
+
+    def render(pipelined: bool) -> list[bytes]:
+        with FrameSimulator(9, width=80, height=60) as sim:
+            poses = handheld_loop(sim.scene, frames=5, fps=30.0, seed=9).world_from_camera
+            frames = list(sim.frames(poses)) if pipelined else [sim.render(p) for p in poses]
+        return [f.color.color.tobytes() + f.depth_mm.tobytes() for f in frames]
+
+    assert render(pipelined=True) == render(pipelined=False)
