@@ -9,7 +9,7 @@ import pytest
 
 from capture.frames import RgbdFrame
 from capture.recording import GT_CLOUD_ATTACHMENT, RecordingReader
-from capture.sim import read_ply, simulate_recording
+from capture.sim import FrameSimulator, handheld_loop, read_ply, simulate_recording
 from capture.sim.trajectory import SIM_EPOCH_NS
 
 W, H = 160, 120
@@ -96,8 +96,6 @@ def test_another_seed_gives_another_room(small_recording: Path, tmp_path: Path) 
 
 
 def test_pipelined_frames_equal_frames_rendered_one_by_one() -> None:
-    from capture.sim import FrameSimulator, handheld_loop
-
     def render(pipelined: bool) -> list[bytes]:
         with FrameSimulator(9, width=80, height=60) as sim:
             poses = handheld_loop(sim.scene, frames=5, fps=30.0, seed=9).world_from_camera
