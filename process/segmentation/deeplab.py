@@ -208,10 +208,16 @@ class DeepLab(nn.Module):
         self.classifier = nn.Conv2d(arch.decoder_channels, arch.num_classes, 1)
         _init_weights(self)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Return logits (N, num_classes, H, W) for a normalised image batch (N, 3, H, W)."""
+    def forward(self, x: torch.Tensor, *, upsample: bool = True) -> torch.Tensor:
+        """Return logits (N, classes, H, W) of a normalised batch (N, 3, H, W).
+
+        With upsample=False the logits stay at the decoder's resolution (stride 4, or the
+        output stride for head "deeplabv3"), for callers that resize once to another size.
+        """
         low, high = self.backbone(x)
-        logits = self.classifier(self.decoder(self.aspp(high), low))
+        logits: torch.Tensor = self.classifier(self.decoder(self.aspp(high), low))
+        if not upsample:
+            return logits
         return F.interpolate(logits, size=x.shape[2:], mode="bilinear", align_corners=False)
 
 

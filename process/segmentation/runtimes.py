@@ -1,8 +1,9 @@
 """Inference runtimes: torch (CPU/CUDA), onnxruntime (an ONNX export) and TFLite (ai-edge-litert).
 
 Each runtime takes a batch of uint8 RGB images (N, h, w, 3) already at the network's input size
-and returns label probabilities (N, NUM_LABELS, h', w') as a torch tensor: class softmax summed
-into RECORDING.md labels through the checkpoint's class -> label map.
+and returns label probabilities (N, NUM_LABELS, h', w') as a torch tensor, at the network's output
+resolution (stride 4 for DeepLabV3+): class softmax summed into RECORDING.md labels through the
+checkpoint's class -> label map. For inference BatchNorm is folded into the convolutions.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 from torch import nn
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 from capture.recording import NUM_LABELS
 from process.errors import ModelError
@@ -44,7 +46,7 @@ class DeployModule(nn.Module):
 
     def __init__(self, ckpt: Checkpoint, *, channels_last: bool = True) -> None:
         super().__init__()
-        self.net = build_from_checkpoint(ckpt)
+        self.net = fold_batchnorm(build_from_checkpoint(ckpt))
         self.register_buffer("mean", torch.tensor(ckpt.mean).view(1, 3, 1, 1) * 255.0)
         self.register_buffer("inv_std", 1.0 / (torch.tensor(ckpt.std).view(1, 3, 1, 1) * 255.0))
         self.identity = ckpt.class_to_label == tuple(range(NUM_LABELS))
@@ -52,15 +54,29 @@ class DeployModule(nn.Module):
         self.channels_last = channels_last
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
-        """Return label probabilities (N, L, H, W) of uint8 images (N, H, W, 3)."""
+        """Return label probabilities (N, L, h, w) at the output stride for uint8 (N, H, W, 3)."""
         x = images.permute(0, 3, 1, 2).float()  # an NHWC-strided view: already channels_last
         if not self.channels_last:
             x = x.contiguous()
         x = (x - self.mean) * self.inv_std
-        probs = torch.softmax(self.net(x), dim=1)
+        # Probabilities at the decoder's stride; the Segmenter resizes them once to the image.
+        probs = torch.softmax(self.net(x, upsample=False), dim=1)
         if self.identity:
             return probs
         return torch.einsum("lc,nchw->nlhw", self.to_labels, probs)
+
+
+def fold_batchnorm(model: nn.Module) -> nn.Module:
+    """Fold every eval-mode BatchNorm that follows a Conv2d into the conv's weights, in place."""
+    for module in model.modules():
+        if not isinstance(module, nn.Sequential):
+            continue
+        for i in range(len(module) - 1):
+            conv, bn = module[i], module[i + 1]
+            if isinstance(conv, nn.Conv2d) and isinstance(bn, nn.BatchNorm2d):
+                module[i] = fuse_conv_bn_eval(conv.eval(), bn.eval())
+                module[i + 1] = nn.Identity()
+    return model
 
 
 def pick_device(device: str) -> torch.device:
