@@ -18,7 +18,6 @@ OBJECT_CLASSES = frozenset(range(fu.TABLE, fu.CLUTTER + 1))
 
 def _try(
     placer: Placer,
-    rng: Rng,
     make: Callable[[], tuple[fu.Assembly, float, npt.ArrayLike]],
     *,
     on_path_ok: bool = False,
@@ -58,7 +57,7 @@ def _on_wall(
         )
         return a, yaw, xy + np.array([0.0, 0.0, height_m])
 
-    return _try(placer, rng, make)
+    return _try(placer, make)
 
 
 def _on_top(
@@ -85,7 +84,7 @@ def _on_top(
         yaw = yaw_table + (rng.uniform(-0.3, 0.3) if back else rng.uniform(-np.pi, np.pi))
         return a, yaw, (world_from_table @ local)[:3]
 
-    return _try(placer, rng, make, on_path_ok=True) is not None
+    return _try(placer, make, on_path_ok=True) is not None
 
 
 def _dining(placer: Placer, rng: Rng) -> tuple[fu.Assembly, npt.NDArray[np.float64]] | None:
@@ -101,7 +100,7 @@ def _dining(placer: Placer, rng: Rng) -> tuple[fu.Assembly, npt.NDArray[np.float
             xy = np.array([cx, cy]) + rng.uniform(-0.5, 0.5, 2)
             return a, float(rng.choice([0.0, np.pi / 2])), (*xy, 0.0)
 
-        found = _try(placer, rng, make)
+        found = _try(placer, make)
         if found is not None:
             break
     if found is not None:
@@ -167,7 +166,7 @@ def _free(placer: Placer, rng: Rng, build: Callable[[], fu.Assembly]) -> bool:
     def make() -> tuple[fu.Assembly, float, npt.ArrayLike]:
         return build(), float(rng.uniform(-np.pi, np.pi)), (*rng.uniform(-half, half), 0.0)
 
-    return _try(placer, rng, make) is not None
+    return _try(placer, make) is not None
 
 
 def _clutter(rng: Rng) -> fu.Assembly:
