@@ -21,6 +21,8 @@ from process.cloud import LabelledCloud
 TABLE, CHAIR, PERSON, PLANT, SOFA, TV, CLUTTER = 4, 5, 6, 7, 8, 9, 10
 FLOOR, WALL = 2, 3
 Box = tuple[float, float, float, float, float, float]  # x0 y0 z0 x1 y1 z1
+_MISSED_PER_M2 = 11.2  # missed patches per m^2 of object surface
+_STRAY_PER_M2 = 1.6  # wrong-class blobs per m^2 of object and furniture surface
 
 
 @dataclass(frozen=True)
@@ -173,7 +175,7 @@ def indoor_scene(*, seed: int = 0, spacing_m: float = 0.016) -> SyntheticScene:
     sampler.rect((0, 4.5, 0), (5.5, 0, 0), (0, 0, 2.5), WALL, 0)
     _furnish(sampler, rng)
     points, truth, _ = sampler.arrays()
-    labels = _transfer_errors(points, truth, rng)
+    labels = _transfer_errors(points, truth, rng, spacing_m=spacing_m)
     flying, flying_labels = _flying_pixels(points, labels, rng)
     all_points = np.concatenate([points, flying]).astype(np.float32)
     all_labels = np.concatenate([labels, flying_labels])
@@ -186,14 +188,23 @@ def indoor_scene(*, seed: int = 0, spacing_m: float = 0.016) -> SyntheticScene:
 
 
 def _transfer_errors(
-    points: npt.NDArray[np.float64], truth: npt.NDArray[np.uint8], rng: np.random.Generator
+    points: npt.NDArray[np.float64],
+    truth: npt.NDArray[np.uint8],
+    rng: np.random.Generator,
+    *,
+    spacing_m: float,
 ) -> npt.NDArray[np.uint8]:
-    """Return labels as 2-D segmentation projected into 3-D would give them."""
+    """Return labels as 2-D segmentation projected into 3-D would give them.
+
+    Patches are counted per square metre of surface, so the error rates do not depend on the
+    sampling: ~11 missed patches (5-12 cm radius) and ~1.6 stray blobs (3-6 cm) per m^2.
+    """
+    per_m2 = spacing_m**2  # surface area of one point
     labels = np.where(truth >= TABLE, truth, 0).astype(np.uint8)  # structure: not the network's
     target = np.flatnonzero(truth >= TABLE)
     tree = cKDTree(points)
     # missed patches: the network saw background on part of an object
-    seeds = rng.choice(target, len(target) // 350, replace=False)
+    seeds = rng.choice(target, round(len(target) * per_m2 * _MISSED_PER_M2), replace=False)
     for ball in tree.query_ball_point(points[seeds], rng.uniform(0.05, 0.12, len(seeds))):
         hit = np.asarray(ball, np.intp)
         labels[hit[truth[hit] >= TABLE]] = 0
@@ -204,7 +215,7 @@ def _transfer_errors(
     labels[background[near]] = truth[target[nearest[near]]]
     # stray blobs: small patches of a wrong class, on objects and on unlabelled furniture
     candidates = np.flatnonzero((truth >= TABLE) | (truth == 0))
-    seeds = rng.choice(candidates, len(candidates) // 2500, replace=False)
+    seeds = rng.choice(candidates, round(len(candidates) * per_m2 * _STRAY_PER_M2), replace=False)
     balls = tree.query_ball_point(points[seeds], rng.uniform(0.03, 0.06, len(seeds)))
     for seed, ball in zip(seeds, balls, strict=True):
         wrong = rng.choice([c for c in range(TABLE, CLUTTER + 1) if c != truth[seed]])

@@ -1,0 +1,103 @@
+"""The paper's adaptive DBSCAN written literally (O(n^2), K = 1..n-1), and small test clouds."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from process.cloud import LabelledCloud
+
+
+def literal_dbscan(
+    dist: npt.NDArray[np.float64], eps: float, min_pts: int
+) -> npt.NDArray[np.int64]:
+    """Return DBSCAN labels (-1 noise) by Ester et al.'s expansion on a full distance matrix."""
+    n = len(dist)
+    labels = np.full(n, -2, np.int64)  # -2 unvisited, -1 noise
+    cluster = -1
+    for p in range(n):
+        if labels[p] != -2:
+            continue
+        neighbours = np.flatnonzero(dist[p] <= eps)
+        if len(neighbours) < min_pts:
+            labels[p] = -1
+            continue
+        cluster += 1
+        labels[p] = cluster
+        seeds = deque(int(q) for q in neighbours)
+        while seeds:
+            q = seeds.popleft()
+            if labels[q] == -1:
+                labels[q] = cluster  # border point
+            if labels[q] != -2:
+                continue
+            labels[q] = cluster
+            reach = np.flatnonzero(dist[q] <= eps)
+            if len(reach) >= min_pts:
+                seeds.extend(int(r) for r in reach)
+    return labels
+
+
+@dataclass(frozen=True)
+class Literal:
+    """The literal computation's curves over K = 1..n-1 and the chosen index (K - 1)."""
+
+    eps: list[float]
+    min_pts: list[int]
+    n_clusters: list[int]
+    chosen: int | None  # None: no stable run
+
+
+def literal_parameters(points: npt.NDArray[np.floating]) -> Literal:
+    """Return the paper's Eq. 1-6 for K = 1..n-1 and the first stable run's largest K."""
+    p = np.asarray(points, np.float64)
+    dist = np.sqrt(((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=2))  # Eq. 1-2
+    ordered = np.sort(dist, axis=1)  # column 0 = the point itself (D_0)
+    n = len(p)
+    eps_list, min_pts_list, counts = [], [], []
+    for k in range(1, n):
+        eps = float(ordered[:, k].mean())  # Eq. 3-4
+        mean_count = float((dist <= eps).sum(axis=1).mean())  # Eq. 5-6, the point included
+        min_pts = max(4, int(np.floor(mean_count + 0.5)))
+        labels = literal_dbscan(dist, eps, min_pts)
+        eps_list.append(eps)
+        min_pts_list.append(min_pts)
+        counts.append(int(labels.max()) + 1)
+    chosen = None  # index of the largest K of the first run of >= 3 equal, non-zero counts
+    i = 0
+    while i < len(counts) and chosen is None:
+        j = i
+        while j + 1 < len(counts) and counts[j + 1] == counts[i]:
+            j += 1
+        if counts[i] > 0 and j - i + 1 >= 3:
+            chosen = j
+        i = j + 1
+    return Literal(eps_list, min_pts_list, counts, chosen)
+
+
+def blobs(
+    seed: int, *, sizes: tuple[int, ...], spread: float = 0.05, noise: int = 5
+) -> npt.NDArray[np.float64]:
+    """Return Gaussian blobs (one per size) 0.5 m apart plus uniform noise points."""
+    rng = np.random.default_rng(seed)
+    parts = [rng.normal((0.5 * i, 0.2 * (i % 2), 0.0), spread, (m, 3)) for i, m in enumerate(sizes)]
+    parts.append(rng.uniform(-0.3, 0.5 * len(sizes), (noise, 3)))
+    return np.concatenate(parts)
+
+
+def grid_patch(
+    x: tuple[float, float], y: tuple[float, float], *, z: float = 0.0, step: float = 0.02
+) -> npt.NDArray[np.float32]:
+    """Return a horizontal grid of points over [x0, x1) x [y0, y1) at height z."""
+    gx, gy = np.meshgrid(np.arange(x[0], x[1] - 1e-9, step), np.arange(y[0], y[1] - 1e-9, step))
+    return np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)]).astype(np.float32)
+
+
+def labelled(points: npt.NDArray[np.floating], labels: npt.ArrayLike) -> LabelledCloud:
+    """Return a grey cloud with the given labels (a scalar is broadcast)."""
+    pts = np.asarray(points, np.float32)
+    lab = np.broadcast_to(np.asarray(labels, np.uint8), (len(pts),)).copy()
+    return LabelledCloud(pts, np.full((len(pts), 3), 128, np.uint8), lab)

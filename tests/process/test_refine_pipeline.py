@@ -1,0 +1,116 @@
+"""The whole refinement and the `refine` command's job, on our synthetic office."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers_refine import grid_patch, labelled
+
+from process.cloud import read_cloud, write_ply
+from process.errors import CloudError
+from process.evaluate import label_metrics
+from process.refine import RefineConfig, refine
+from process.refine.synthetic import SyntheticScene, indoor_scene
+from process.refine_job import refine_file
+
+UP = np.array([0.0, 0.0, 1.0])
+
+
+@pytest.fixture(scope="module")
+def office() -> SyntheticScene:
+    return indoor_scene(seed=1, spacing_m=0.03)  # ~95k points
+
+
+def test_f1_over_target_classes_rises_from_phase_i_to_iii(office: SyntheticScene) -> None:
+    result = refine(office.cloud, RefineConfig(), up=UP)
+    f1 = {
+        p: label_metrics(c.labels, office.truth)["all"]["f1"]
+        for p, c in result.phase_clouds().items()
+    }
+    assert f1["I"] < 0.8  # the generator's label-transfer errors
+    assert f1["III"] > 0.9 and f1["III"] > f1["I"] + 0.1
+    assert {p.label for p in result.planes.planes} >= {2, 3}
+    assert set(result.seconds) == {"planes", "sor", "dbscan", "regrowth", "total"}
+    for entry in result.dbscan.values():
+        assert entry.choice is not None and entry.curves is not None
+        assert entry.curves.eps_m[entry.choice.k - 1] == entry.choice.eps_m
+
+
+def test_method_1_shares_one_estimate_over_all_classes(office: SyntheticScene) -> None:
+    result = refine(office.cloud, RefineConfig(dbscan_method=1), up=UP)
+    assert result.shared is not None and result.shared.choice is not None
+    assert {e.choice for e in result.dbscan.values()} == {result.shared.choice}
+    f1 = {
+        p: label_metrics(c.labels, office.truth)["all"]["f1"]
+        for p, c in result.phase_clouds().items()
+    }
+    assert f1["III"] > f1["I"]
+
+
+def test_refine_file_writes_every_surviving_point_and_the_metrics(
+    office: SyntheticScene, tmp_path: Path
+) -> None:
+    write_ply(tmp_path / "fused.ply", office.cloud)
+    write_ply(tmp_path / "truth.ply", office.gt_cloud)
+    cfg = RefineConfig(up=(0.0, 0.0, 1.0))
+    metrics = refine_file(
+        tmp_path / "fused.ply", out_dir=tmp_path / "out", cfg=cfg, gt_cloud=tmp_path / "truth.ply"
+    )
+    assert json.loads((tmp_path / "out" / "metrics.json").read_text()) == metrics
+    section = metrics["refinement"]
+    assert set(section["phases"]) == {"I", "II", "III"}
+    assert section["phases"]["III"]["all"]["f1"] > section["phases"]["I"]["all"]["f1"]
+    assert {"k", "eps_m", "min_pts"} <= set(section["dbscan"]["chair"])
+    refined = read_cloud(tmp_path / "out" / "map_refined.ply")
+    assert refined.clusters is not None
+    assert (
+        len(refined)
+        == section["points"]["final"]
+        == len(office.cloud) - section["points"]["sor_outliers"]
+    )
+    kept = np.isin(office.cloud.points.view("V12").ravel(), refined.points.view("V12").ravel())
+    assert kept.sum() == len(refined)  # at their input positions
+    assert set(np.unique(refined.labels[refined.clusters > 0])) <= set(range(4, 11))
+
+
+def test_a_cloud_file_without_labels_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "plain.pcd"
+    path.write_text(
+        "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\n"
+        "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n0 0 0\n"
+    )
+    with pytest.raises(CloudError, match="expected a 'label' field per point, found fields x y z"):
+        refine_file(path, out_dir=tmp_path / "out", cfg=RefineConfig())
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("n", [0, 3])
+def test_tiny_clouds_are_clean_no_ops(n: int) -> None:
+    cloud = labelled(np.arange(3 * n, dtype=np.float32).reshape(n, 3), 5)
+    result = refine(cloud, RefineConfig(), up=UP)
+    assert len(result.final()) == n
+    assert (result.labels_iii == 0).all()  # 3 points cannot make a cluster of 100
+    assert all(e.choice is None for e in result.dbscan.values())
+
+
+def test_an_unlabelled_cloud_keeps_its_planes_and_clusters_nothing() -> None:
+    floor = grid_patch((0.0, 3.0), (0.0, 3.0), step=0.02)
+    box = grid_patch((1.0, 1.5), (1.0, 1.5), z=0.5)
+    result = refine(labelled(np.concatenate([floor, box]), 0), RefineConfig(), up=UP)
+    assert (result.labels_iii[: len(floor)] == 2).all()
+    assert (result.labels_iii[len(floor) :] == 0).all()
+    assert result.dbscan == {}
+
+
+def test_a_class_too_small_for_a_cluster_is_relabelled_zero_and_reported() -> None:
+    chair = grid_patch((0.0, 0.6), (0.0, 0.6), z=0.45)
+    labels = np.full(len(chair), 5, np.uint8)
+    speck = np.flatnonzero(np.linalg.norm(chair[:, :2] - 0.3, axis=1) < 0.025)  # 5 points
+    labels[speck] = 7  # "plant" on the chair
+    result = refine(labelled(chair, labels), RefineConfig(), up=UP)
+    assert result.dbscan[7].choice is None and result.dbscan[7].relabelled == len(speck) == 5
+    assert (result.labels_ii[speck] == 0).all()
+    assert (result.labels_iii[speck] == 5).all()  # regrown into the chair around them

@@ -1,0 +1,93 @@
+"""Planes and SOR: known heights and orientations, planted outliers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers_refine import grid_patch
+
+from process.refine import RefineConfig
+from process.refine.outliers import sor_inliers
+from process.refine.planes import CEILING, FLOOR, WALL, segment_planes
+
+UP = np.array([0.0, 0.0, 1.0])
+CFG = RefineConfig(plane_min_points=2000, plane_max_remaining=100)
+
+
+def _room() -> tuple[np.ndarray, dict[str, slice]]:
+    """A floor at z = 0.5, a ceiling at 3.0, a wall at y = 2.1 and a table top at 1.25."""
+    floor = grid_patch((0.0, 3.0), (0.0, 2.0), z=0.5)  # 15,000 points: the largest plane
+    ceiling = grid_patch((0.0, 2.0), (0.0, 1.2), z=3.0)  # 6,000
+    wall = grid_patch((0.0, 2.0), (0.56, 2.9), z=0.0)[:, [0, 2, 1]]  # y <-> z: upright, 11,700
+    wall[:, 1] = 2.1
+    table = grid_patch((0.5, 1.5), (0.5, 1.3), z=1.25)  # 2,000: level, but mid-height
+    parts = [floor, ceiling, wall, table]
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    names = ("floor", "ceiling", "wall", "table")
+    return np.concatenate(parts), {
+        n: slice(a, b) for n, a, b in zip(names, bounds[:-1], bounds[1:], strict=True)
+    }
+
+
+def test_a_plane_at_a_known_height_is_the_floor() -> None:
+    points, parts = _room()
+    seg = segment_planes(points, CFG, up=UP)
+    assert (seg.labels[parts["floor"]] == FLOOR).all()
+    floor = next(p for p in seg.planes if p.label == FLOOR)
+    assert floor.height_m == pytest.approx(0.5, abs=1e-3)
+    assert abs(floor.model[2]) == pytest.approx(1.0, abs=1e-6)
+
+
+def test_ceiling_and_wall_are_classified_and_a_table_top_stays_an_object() -> None:
+    points, parts = _room()
+    seg = segment_planes(points, CFG, up=UP)
+    assert (seg.labels[parts["ceiling"]] == CEILING).all()
+    assert (seg.labels[parts["wall"]] == WALL).all()
+    assert (seg.labels[parts["table"]] == 0).all()
+    assert not seg.structural[parts["table"]].any()
+
+
+def test_without_gravity_the_largest_plane_is_the_floor() -> None:
+    points, parts = _room()
+    seg = segment_planes(points, CFG, up=None)
+    assert seg.up_source == "largest plane"
+    assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-6)
+    assert (seg.labels[parts["floor"]] == FLOOR).all()
+
+
+def test_a_tilted_gravity_is_snapped_to_the_floor() -> None:
+    points, _ = _room()
+    tilted = np.array([0.0, np.sin(np.radians(15)), np.cos(np.radians(15))])
+    seg = segment_planes(points, CFG, up=tilted)
+    assert seg.up_source == "argument snapped to plane"
+    assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-6)
+
+
+def test_furniture_coplanar_with_a_wall_but_far_from_it_stays_an_object() -> None:
+    points, parts = _room()
+    shelf = grid_patch((0.0, 0.4), (0.6, 1.0), z=0.0)[:, [0, 2, 1]]  # upright, in the wall plane
+    shelf[:, 1] = 2.1
+    shelf[:, 0] += 3.0  # 1 m beyond the wall's end
+    seg = segment_planes(np.concatenate([points, shelf]), CFG, up=UP)
+    assert (seg.labels[parts["wall"]] == WALL).all()
+    assert (seg.labels[len(points) :] == 0).all()
+
+
+def test_a_cloud_smaller_than_min_has_no_plane() -> None:
+    seg = segment_planes(np.zeros((3, 3), np.float32), CFG, up=UP)
+    assert seg.planes == ()
+    assert (seg.labels == 0).all()
+
+
+def test_sor_removes_planted_outliers() -> None:
+    rng = np.random.default_rng(0)
+    surface = grid_patch((0.0, 1.0), (0.0, 1.0), step=0.02)
+    outliers = rng.uniform(-0.5, 1.5, (20, 3)).astype(np.float32)
+    outliers[:, 2] = rng.uniform(0.3, 1.0, 20)  # well off the surface
+    keep = sor_inliers(np.concatenate([surface, outliers]), nb_neighbors=20, std_ratio=2.0)
+    assert not keep[len(surface) :].any()
+    assert keep[: len(surface)].mean() > 0.99
+
+
+def test_sor_keeps_a_cloud_too_small_for_statistics() -> None:
+    assert sor_inliers(np.zeros((3, 3), np.float32), nb_neighbors=20, std_ratio=2.0).all()
