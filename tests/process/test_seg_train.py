@@ -9,9 +9,22 @@ from helpers_seg import SCENE_COLORS, synthetic_scene, write_labelled_recording
 
 from process.errors import ConfigError, StageError
 from process.segmentation import SegmentationConfig, Segmenter
-from process.segmentation.dataset import augment_pair, class_weights, color_jitter, load_labelled
+from process.segmentation.dataset import (
+    LabelledImages,
+    augment_pair,
+    class_weights,
+    color_jitter,
+    load_labelled,
+)
+from process.segmentation.deeplab import build_model
 from process.segmentation.metrics import IGNORE, confusion_matrix, iou_per_label, mean_iou
-from process.segmentation.train import EpochStats, TrainConfig, train
+from process.segmentation.train import (
+    EpochStats,
+    TrainConfig,
+    normalise,
+    recalibrate_batchnorm,
+    train,
+)
 from process.segmentation.weights import load_checkpoint
 
 TINY = TrainConfig(
@@ -86,6 +99,24 @@ def test_tiny_training_run_lowers_the_loss_and_writes_a_usable_checkpoint(tmp_pa
     color, _ = synthetic_scene(np.random.default_rng(3))
     seg = Segmenter(SegmentationConfig(weights=str(out))).segment(color)
     assert seg.labels.shape == (96, 128)
+
+
+def test_batchnorm_recalibration_sets_the_data_statistics() -> None:
+    rng = np.random.default_rng(0)
+    scenes = [synthetic_scene(rng) for _ in range(TINY.batch_size)]
+    data = LabelledImages(np.stack([c for c, _ in scenes]), np.stack([lab for _, lab in scenes]))
+    model = build_model(TINY.arch)
+    stem = model.backbone.features[0]
+    assert isinstance(stem, torch.nn.Sequential)
+    conv, stem_bn = stem[0], stem[1]
+    assert isinstance(stem_bn, torch.nn.BatchNorm2d) and stem_bn.running_mean is not None
+    stem_bn.running_mean.fill_(100.0)  # stale statistics
+    recalibrate_batchnorm(model, data, TINY, rng, batches=1)
+    x = torch.from_numpy(data.colors).permute(0, 3, 1, 2).float() / 255.0
+    with torch.no_grad():
+        expected = conv(normalise(x)).mean(dim=(0, 2, 3))
+    assert torch.allclose(stem_bn.running_mean, expected, atol=1e-4)
+    assert stem_bn.momentum == TINY.bn_momentum
 
 
 def test_train_config_rejects_bad_values() -> None:
