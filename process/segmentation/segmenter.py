@@ -18,7 +18,7 @@ from process.errors import ModelError, StageError
 from process.segmentation.config import Segmentation, SegmentationConfig
 from process.segmentation.runtimes import OnnxRuntime, Runtime, TorchRuntime, pick_device
 from process.segmentation.tflite_runtime import TfliteRuntime
-from process.segmentation.weights import Checkpoint, load_checkpoint, resolve_weights
+from process.segmentation.weights import load_checkpoint, resolve_weights
 
 logger = logging.getLogger(__name__)
 
@@ -33,48 +33,42 @@ class Segmenter:
         self, cfg: SegmentationConfig, *, weights: Path | None = None, device: str = "auto"
     ) -> None:
         self.cfg = cfg
-        spec = weights if weights is not None else cfg.weights
-        device = device if device != "auto" else cfg.device
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
-        path = resolve_weights(spec)
-        self.weights_path = path
-        self.short_side_px = 0
-        self.runtime: Runtime
-        if cfg.backend == "tflite":
-            if path.suffix != ".tflite":
-                raise ModelError(
-                    f"the tflite backend needs a .tflite model, found {path.suffix!r}: {path}"
-                )
-            self.runtime = TfliteRuntime(
-                path, threads=cfg.threads, class_to_label=self._labels(VOC_TO_LABEL)
-            )
-            self.device = "cpu"
-            return
-        ckpt = load_checkpoint(path)
-        ckpt = replace(ckpt, class_to_label=self._labels(ckpt.class_to_label))
-        self.short_side_px = cfg.short_side_px or ckpt.short_side_px
-        self.checkpoint_info = ckpt.info
-        self.runtime = self._runtime(ckpt, device)
-        logger.info(
-            "segmentation: %s on %s (%s), short side %d px",
-            path.name,
-            cfg.backend,
-            self.device,
-            self.short_side_px,
+        self.weights_path = resolve_weights(weights if weights is not None else cfg.weights)
+        self.device = (
+            "cpu"
+            if cfg.backend != "torch"
+            else str(pick_device(device if device != "auto" else cfg.device))
         )
+        self.short_side_px = 0  # 0: the runtime fixes the input size
+        self.checkpoint_info: dict[str, object] = {}
+        self.runtime = self._tflite() if cfg.backend == "tflite" else self._network()
+        logger.info("segmentation: %s on %s (%s)", self.weights_path.name, cfg.backend, self.device)
+
+    def _tflite(self) -> Runtime:
+        path = self.weights_path
+        if path.suffix != ".tflite":
+            raise ModelError(
+                f"the tflite backend needs a .tflite model, found {path.suffix!r}: {path}"
+            )
+        return TfliteRuntime(
+            path, threads=self.cfg.threads, class_to_label=self._labels(VOC_TO_LABEL)
+        )
+
+    def _network(self) -> Runtime:
+        ckpt = load_checkpoint(self.weights_path)
+        ckpt = replace(ckpt, class_to_label=self._labels(ckpt.class_to_label))
+        self.short_side_px = self.cfg.short_side_px or ckpt.short_side_px
+        self.checkpoint_info = dict(ckpt.info)
+        if self.cfg.backend == "onnx":
+            return OnnxRuntime(ckpt, threads=self.cfg.threads)
+        return TorchRuntime(ckpt, device=self.device, channels_last=self.cfg.channels_last)
 
     def _labels(self, class_to_label: tuple[int, ...]) -> tuple[int, ...]:
         if not self.cfg.structural_to_background:
             return class_to_label
         return tuple(0 if v in STRUCTURAL_LABELS else v for v in class_to_label)
-
-    def _runtime(self, ckpt: Checkpoint, device: str) -> Runtime:
-        if self.cfg.backend == "onnx":
-            self.device = "cpu"
-            return OnnxRuntime(ckpt, threads=self.cfg.threads)
-        self.device = str(pick_device(device))
-        return TorchRuntime(ckpt, device=device, channels_last=self.cfg.channels_last)
 
     def input_size(self, height: int, width: int) -> tuple[int, int]:
         """Return the (width, height) at which an image of this size goes through the network."""
