@@ -9,10 +9,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from capture.recording import LABEL_NAMES
-from process.cloud import LabelledCloud, read_cloud, write_atomic, write_ply
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import GT_CLOUD_ATTACHMENT, LABEL_NAMES
+from process.cloud import LabelledCloud, parse_ply, read_cloud, write_atomic, write_ply
 from process.evaluate import cloud_phase_metrics
 from process.refine import ClassClustering, RefineConfig, RefineResult, refine
+from process.refine.steplog import StepLogger, log_steps
 
 logger = logging.getLogger(__name__)
 
@@ -27,7 +31,10 @@ def refine_file(
     cfg: RefineConfig,
     gt_cloud: Path | None = None,
 ) -> dict[str, Any]:
-    """Refine a labelled PLY/PCD; write map_refined.ply and metrics.json; return the metrics.
+    """Refine a labelled PLY/PCD; write map_refined.ply and metrics.json; return the section.
+
+    metrics.json holds {"refinement": section, "seconds": {"refinement": s}}, the returned
+    section being the "refinement" object of ARCHITECTURE.md.
 
     Raises:
         CloudError: a cloud file is missing, malformed or has no `label` field.
@@ -38,11 +45,34 @@ def refine_file(
     result = refine(cloud, cfg)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_ply(out_dir / REFINED_PLY, result.final())
-    metrics: dict[str, Any] = {"refinement": refinement_metrics(result, gt_cloud=truth)}
-    metrics["seconds"] = {"refinement": time.perf_counter() - start}
+    section = refinement_metrics(result, gt_cloud=truth)
+    metrics = {"refinement": section, "seconds": {"refinement": time.perf_counter() - start}}
     write_atomic(out_dir / METRICS_JSON, json.dumps(metrics, indent=2).encode("utf-8"))
     logger.info("refined %s -> %s", cloud_path, out_dir / REFINED_PLY)
-    return metrics
+    return section
+
+
+def refine_and_log(
+    cloud: LabelledCloud,
+    cfg: RefineConfig,
+    *,
+    viz: StepLogger,
+    up: npt.NDArray[np.float64] | None = None,
+    gt_cloud_ply: bytes | None = None,
+) -> tuple[LabelledCloud, dict[str, Any]]:
+    """Refine the fused map, log every step, return the refined map and the metrics section.
+
+    `gt_cloud_ply` is the recording's ground-truth cloud attachment (PLY bytes), if any.
+    """
+    truth = None
+    if gt_cloud_ply is not None:
+        truth = parse_ply(gt_cloud_ply, source=f"attachment {GT_CLOUD_ATTACHMENT}")
+    result = refine(cloud, cfg, up=up)
+    log_steps(result, viz)
+    section = refinement_metrics(result, gt_cloud=truth)
+    for phase, per_class in section.get("phases", {}).items():
+        viz.log_metrics(f"refinement_phase_{phase}", per_class["all"])
+    return result.final(), section
 
 
 def refinement_metrics(

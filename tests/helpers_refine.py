@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -101,3 +103,16 @@ def labelled(points: npt.NDArray[np.floating], labels: npt.ArrayLike) -> Labelle
     pts = np.asarray(points, np.float32)
     lab = np.broadcast_to(np.asarray(labels, np.uint8), (len(pts),)).copy()
     return LabelledCloud(pts, np.full((len(pts), 3), 128, np.uint8), lab)
+
+
+class RecordingLogger:
+    """A logger that records each call as (method, first argument, keyword arguments)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, object, dict[str, Any]]] = []
+
+    def __getattr__(self, method: str) -> Callable[..., None]:
+        def record(first: object = None, *_: object, **kwargs: Any) -> None:
+            self.calls.append((method, first, kwargs))
+
+        return record

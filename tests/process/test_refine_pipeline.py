@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers_refine import grid_patch, labelled
+from helpers_refine import RecordingLogger, grid_patch, labelled
 
-from process.cloud import read_cloud, write_ply
+from process.cloud import ply_bytes, read_cloud, write_ply
 from process.errors import CloudError
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
 from process.refine.synthetic import SyntheticScene, indoor_scene
-from process.refine_job import refine_file
+from process.refine_job import refine_and_log, refine_file
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -56,11 +56,11 @@ def test_refine_file_writes_every_surviving_point_and_the_metrics(
     write_ply(tmp_path / "fused.ply", office.cloud)
     write_ply(tmp_path / "truth.ply", office.gt_cloud)
     cfg = RefineConfig(up=(0.0, 0.0, 1.0))
-    metrics = refine_file(
+    section = refine_file(
         tmp_path / "fused.ply", out_dir=tmp_path / "out", cfg=cfg, gt_cloud=tmp_path / "truth.ply"
     )
-    assert json.loads((tmp_path / "out" / "metrics.json").read_text()) == metrics
-    section = metrics["refinement"]
+    written = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert written["refinement"] == section and written["seconds"]["refinement"] > 0
     assert set(section["phases"]) == {"I", "II", "III"}
     assert section["phases"]["III"]["all"]["f1"] > section["phases"]["I"]["all"]["f1"]
     assert {"k", "eps_m", "min_pts"} <= set(section["dbscan"]["chair"])
@@ -114,3 +114,22 @@ def test_a_class_too_small_for_a_cluster_is_relabelled_zero_and_reported() -> No
     assert result.dbscan[7].choice is None and result.dbscan[7].relabelled == len(speck) == 5
     assert (result.labels_ii[speck] == 0).all()
     assert (result.labels_iii[speck] == 5).all()  # regrown into the chair around them
+
+
+def test_refine_and_log_logs_every_step_in_stage_order(office: SyntheticScene) -> None:
+    viz = RecordingLogger()
+    truth = ply_bytes(office.gt_cloud)
+    refined, section = refine_and_log(
+        office.cloud, RefineConfig(), viz=viz, up=UP, gt_cloud_ply=truth
+    )
+    assert [c[1] for c in viz.calls if c[0] == "set_stage"] == [1, 2, 3, 4, 5]
+    kinds = [c[1] for c in viz.calls if c[0] == "log_refine"]
+    assert kinds == ["planes", "outliers", "clusters", "regrown"]
+    curves = [c for c in viz.calls if c[0] == "log_dbscan_curves"]
+    assert {c[1] for c in curves} == {e for e in section["dbscan"]}
+    for _, _, kwargs in curves:
+        assert kwargs["chosen_k"] in kwargs["ks"]
+        assert len(kwargs["ks"]) == len(kwargs["eps_m"]) == len(kwargs["n_clusters"])
+    assert ("log_map", "refined") in [c[:2] for c in viz.calls]
+    assert len(refined) == section["points"]["final"]
+    assert section["phases"]["III"]["all"]["f1"] > 0.9
