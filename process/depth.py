@@ -26,12 +26,14 @@ from process.errors import ConfigError, StageError
 DepthImage = npt.NDArray[np.float32]  # (H, W) metres, 0 = no depth
 
 _MAX_RECT_PX = 16  # a depth pixel never covers more colour pixels than this per axis
+Z_BUFFERS = ("nearest", "mean")
 
 
 @dataclass(frozen=True, slots=True)
 class DepthConfig:
     """Depth registration and filters; everything but the range clip is off by default."""
 
+    z_buffer: str = "mean"  # "mean": unbiased by sensor noise; "nearest": exactly rs2::align
     min_depth_m: float = 0.1  # closer depth is dropped (D435 minimum range is ~0.2 m)
     max_depth_m: float = 10.0  # farther depth is dropped
     hole_filling: bool = False  # fill holes from their neighbours (librealsense hole filling)
@@ -48,6 +50,8 @@ class DepthConfig:
                 f"depth: expected 0 <= min_depth_m < max_depth_m, found {self.min_depth_m}"
                 f" and {self.max_depth_m}; fix [depth] in the config"
             )
+        if self.z_buffer not in Z_BUFFERS:
+            raise ConfigError(f"depth.z_buffer must be one of {Z_BUFFERS}, found {self.z_buffer!r}")
         if not 1 <= self.hole_filling_px <= 32:
             raise ConfigError(
                 f"depth.hole_filling_px must be in 1..32, found {self.hole_filling_px}"
@@ -89,6 +93,7 @@ class DepthProcessor:
                 depth_intrinsics=frame.depth_intrinsics,
                 color_intrinsics=frame.color_intrinsics,
                 color_from_depth=frame.depth_to_color.color_from_depth,
+                z_buffer=self.cfg.z_buffer,
             )
         return filter_depth(depth, self.cfg)
 
@@ -134,6 +139,7 @@ def register_depth(
     color_intrinsics: Intrinsics,
     color_from_depth: npt.NDArray[np.float64],
     z_frame: str = "depth",
+    z_buffer: str = "nearest",
 ) -> DepthImage:
     """Return the depth image seen from the colour camera (z in metres, 0 = none), z-buffered.
 
@@ -144,7 +150,13 @@ def register_depth(
         color_from_depth: (4, 4) transform of depth-camera points into the colour camera.
         z_frame: "depth" writes (and z-buffers on) the depth camera's z, exactly as `rs2::align`
             and realsense-ros's aligned_depth_to_color do; "color" writes the colour camera's z.
+        z_buffer: where several depth pixels cover a colour pixel, "nearest" keeps the nearest
+            value (`rs2::align`), "mean" the mean of the values within 5 % of the nearest (the
+            same surface). With sensor noise the nearest of a few samples is biased towards the
+            camera (by ~2 cm at 4 m on a D435); their mean is not, and is less noisy.
     """
+    if z_buffer not in Z_BUFFERS:
+        raise StageError(f"z_buffer must be one of {Z_BUFFERS}, found {z_buffer!r}")
     if z_frame not in ("depth", "color"):
         raise StageError(f"z_frame must be 'depth' or 'color', found {z_frame!r}")
     z = np.asarray(depth_m, np.float32)
@@ -175,13 +187,33 @@ def register_depth(
     width = np.minimum(width.ravel()[idx], _MAX_RECT_PX)
     height = np.minimum(height.ravel()[idx], _MAX_RECT_PX)
     out = np.full(h_c * w_c, np.inf, np.float32)
+    targets, values = [], []
     for dy in range(int(height.max(initial=0))):
         for dx in range(int(width.max(initial=0))):
-            sel = np.flatnonzero((height > dy) & (width > dx)) if dy or dx else slice(None)
+            pick = np.flatnonzero((height > dy) & (width > dx))
+            target = (base[pick] + (dy * w_c + dx)).astype(np.int32)
             # Scatter-min is the z-buffer: the nearer surface wins where rectangles overlap.
-            np.minimum.at(out, base[sel] + (dy * w_c + dx), z_out[sel])
+            np.minimum.at(out, target, z_out[pick])
+            if z_buffer == "mean":
+                targets.append(target)
+                values.append(z_out[pick])
+    if z_buffer == "mean":
+        out = _mean_of_nearest(out, np.concatenate(targets), np.concatenate(values))
     out[np.isinf(out)] = 0.0
     return out.reshape(h_c, w_c)
+
+
+def _mean_of_nearest(
+    nearest: npt.NDArray[np.float32], target: npt.NDArray[np.int32], values: npt.NDArray[np.float32]
+) -> npt.NDArray[np.float32]:
+    """Return per pixel the mean of the values within 5 % of the nearest (the same surface)."""
+    near = values <= nearest[target] * np.float32(1.05)
+    total = np.zeros(len(nearest), np.float32)
+    count = np.zeros(len(nearest), np.float32)
+    # ufunc.at is the fastest scatter-add here (faster than bincount with a boolean selection).
+    np.add.at(total, target, np.where(near, values, np.float32(0.0)))
+    np.add.at(count, target, near.astype(np.float32))
+    return np.where(count > 0, total / np.maximum(count, 1), np.inf).astype(np.float32)
 
 
 def _project_corners(

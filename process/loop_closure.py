@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
 from process.odometry_features import Keyframe, PnpSolver, information_from_points, match
+
+if TYPE_CHECKING:
+    from process.odometry_config import OdometryConfig
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,3 +146,55 @@ def find_loop(
         old_from_current = result.reference_from_camera
         best = Edge(current.id, old.id, old_from_current, support, True), len(result.inliers)
     return best
+
+
+class LoopCloser:
+    """Search each new keyframe's place among old keyframes; on a match, optimise the graph."""
+
+    def __init__(
+        self, cfg: OdometryConfig, *, pnp: PnpSolver, graph: PoseGraph, keyframes: list[Keyframe]
+    ) -> None:
+        self.cfg = cfg
+        self.pnp = pnp
+        self.graph = graph
+        self.keyframes = keyframes
+        self._cooldown = 0
+
+    def close(self, kf: Keyframe) -> str:
+        """Return a description of the loop closed from this keyframe, or "" if none was."""
+        cfg = self.cfg
+        if not cfg.loop_closure:
+            return ""
+        if self._cooldown > 0:
+            self._cooldown -= 1
+            return ""
+        ids = loop_candidates(
+            kf,
+            self.keyframes,
+            poses=self.graph.poses,
+            min_gap=cfg.loop_min_gap,
+            count=cfg.loop_candidates,
+            min_similarity=cfg.loop_min_similarity,
+            radius_m=cfg.loop_search_radius_m,
+        )
+        candidates = [self.keyframes[i] for i in ids]
+        found = find_loop(
+            kf,
+            candidates,
+            pnp=self.pnp,
+            match_ratio=cfg.match_ratio,
+            min_inliers=cfg.loop_min_inliers,
+        )
+        if found is None:
+            return ""
+        edge, n_inliers = found
+        self.graph.add_edge(edge)
+        moved_m, kept = self.graph.optimise(
+            max_correspondence_m=cfg.loop_max_correspondence_m,
+            prune_threshold=cfg.loop_prune_threshold,
+        )
+        self._cooldown = cfg.loop_cooldown
+        return (
+            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers);"
+            f" {kept} loop edge(s) kept, keyframes moved by up to {moved_m:.3f} m"
+        )

@@ -97,7 +97,7 @@ class DenseAligner:
             o3d.t.geometry.Image(o3d.core.Tensor.from_numpy(color)),
             o3d.t.geometry.Image(o3d.core.Tensor.from_numpy(depth)),
         )
-        return DenseImage(rgbd, normal_conditioning(depth, self.k_small))
+        return DenseImage(rgbd, normal_conditioning(depth, self.k_small, block=4))
 
     def align(
         self,
@@ -131,20 +131,24 @@ class DenseAligner:
 
 
 def normal_conditioning(
-    depth_m: npt.NDArray[np.float32], camera_matrix: npt.NDArray[np.float64]
+    depth_m: npt.NDArray[np.float32], camera_matrix: npt.NDArray[np.float64], *, block: int = 1
 ) -> float:
     """Return the smallest / largest eigenvalue of the scatter of surface normals (0 .. 1).
 
-    Normals come from central differences of the back-projected depth; the ratio is 0 when all
-    surfaces share a normal (one plane) or lie in one pencil of directions (two planes).
+    Normals come from central differences of the back-projected depth, averaged over blocks of
+    block x block pixels first so that sensor noise does not pass for surface variety; the ratio
+    is 0 when all surfaces share a normal (one plane) or lie in one pencil of directions.
     """
+    k = camera_matrix.copy()
+    if block > 1:
+        h, w = depth_m.shape[0] // block, depth_m.shape[1] // block
+        blocks = depth_m[: h * block, : w * block].reshape(h, block, w, block)
+        complete = blocks.min(axis=(1, 3)) > 0
+        depth_m = np.where(complete, blocks.mean(axis=(1, 3)), 0.0).astype(np.float32)
+        k[:2, :2] /= block
+        k[:2, 2] = (k[:2, 2] + 0.5) / block - 0.5
     h, w = depth_m.shape
-    fx, fy, cx, cy = (
-        camera_matrix[0, 0],
-        camera_matrix[1, 1],
-        camera_matrix[0, 2],
-        camera_matrix[1, 2],
-    )
+    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
     u = (np.arange(w, dtype=np.float32) - cx) / fx
     v = (np.arange(h, dtype=np.float32) - cy) / fy
     z = depth_m
@@ -155,7 +159,7 @@ def normal_conditioning(
     normals = np.cross(dx[ok], dy[ok])
     length = np.linalg.norm(normals, axis=1)
     normals = normals[length > 0] / length[length > 0, None]
-    if len(normals) < 100:
+    if len(normals) < 20:
         return 0.0
     eig = np.linalg.eigvalsh(normals.T.astype(np.float64) @ normals / len(normals))
     return float(eig[0] / eig[-1]) if eig[-1] > 0 else 0.0

@@ -12,6 +12,10 @@ import numpy.typing as npt
 from capture.recording import Intrinsics
 
 THUMB_SIZE = (32, 24)  # (w, h) of the keyframe thumbnails used for place recognition
+_LIFT_RADIUS = 2  # keypoint depth from the 5x5 neighbourhood
+_DY, _DX = (
+    g.ravel() for g in np.mgrid[-_LIFT_RADIUS : _LIFT_RADIUS + 1, -_LIFT_RADIUS : _LIFT_RADIUS + 1]
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +44,7 @@ class Keyframe:
     descriptors: npt.NDArray[np.uint8]  # (M, 32)
     points: npt.NDArray[np.float32]  # (M, 3) keyframe camera frame
     thumbnail: npt.NDArray[np.float32]  # (24 * 32,) zero mean, unit norm
+    first_inliers: int = 0  # PnP inliers of the first frame tracked against it
     dense: Any = field(default=None)  # downsampled RGB-D for dense alignment, reference only
 
 
@@ -100,28 +105,30 @@ class FeatureExtractor:
     ) -> npt.NDArray[np.float32]:
         """Return the 3-D point (camera frame) of each pixel, NaN where the depth is unusable.
 
-        Depth is interpolated bilinearly at the sub-pixel keypoint, and only where its 3x3
-        neighbourhood is complete and smooth: a corner on a depth edge has no single depth.
+        A plane is fitted to the 5x5 depths around the keypoint that agree with their median (the
+        majority surface), and evaluated at the sub-pixel keypoint: this averages the sensor's
+        noise down and is exact on planes. A keypoint whose neighbourhood has no clear majority
+        surface (a depth edge, a hole) gets no depth.
         """
         out = np.full((len(xy), 3), np.nan, np.float32)
         if len(xy) == 0:
             return out
         h, w = depth_m.shape
-        x0 = np.clip(np.floor(xy[:, 0]).astype(np.int64), 1, w - 3)
-        y0 = np.clip(np.floor(xy[:, 1]).astype(np.int64), 1, h - 3)
-        fx = np.clip(xy[:, 0] - x0, 0.0, 1.0)
-        fy = np.clip(xy[:, 1] - y0, 0.0, 1.0)
-        patch = np.stack(
-            [depth_m[y0 + dy, x0 + dx] for dy in (-1, 0, 1, 2) for dx in (-1, 0, 1, 2)], axis=1
-        )  # (N, 16), 4x4 neighbourhood around the sample
-        lo, hi = patch.min(axis=1), patch.max(axis=1)
-        d00, d01 = depth_m[y0, x0], depth_m[y0, x0 + 1]
-        d10, d11 = depth_m[y0 + 1, x0], depth_m[y0 + 1, x0 + 1]
-        z = (d00 * (1 - fx) + d01 * fx) * (1 - fy) + (d10 * (1 - fx) + d11 * fx) * fy
-        ok = (lo >= self.min_depth_m) & (hi <= self.max_depth_m) & (hi - lo <= 0.03 * z + 0.01)
+        r = _LIFT_RADIUS
+        cx = np.clip(np.rint(xy[:, 0]).astype(np.int64), r, w - 1 - r)
+        cy = np.clip(np.rint(xy[:, 1]).astype(np.int64), r, h - 1 - r)
+        patch = depth_m[cy[:, None] + _DY[None, :], cx[:, None] + _DX[None, :]]  # (N, 25)
+        valid = patch > 0
+        median = np.median(np.where(valid, patch, np.nan), axis=1)
+        with np.errstate(invalid="ignore"):
+            inlier = valid & (np.abs(patch - median[:, None]) <= 0.03 * median[:, None] + 0.01)
+        weight = inlier.astype(np.float32)
+        count = weight.sum(axis=1)
+        ok = (count >= 0.5 * len(_DX)) & (median >= self.min_depth_m) & (median <= self.max_depth_m)
+        z = _plane_at(patch[ok], weight[ok], xy[ok, 0] - cx[ok], xy[ok, 1] - cy[ok])
         rays = self.normalised(xy[ok])
-        out[ok, :2] = rays * z[ok, None]
-        out[ok, 2] = z[ok]
+        out[ok, :2] = rays * z[:, None]
+        out[ok, 2] = z
         return out
 
     def normalised(self, xy: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
@@ -135,6 +142,28 @@ class FeatureExtractor:
             xy.reshape(-1, 1, 2).astype(np.float64), self.camera_matrix, self.dist
         )
         return und.reshape(-1, 2).astype(np.float32)
+
+
+def _plane_at(
+    patch: npt.NDArray[np.float32],
+    weight: npt.NDArray[np.float32],
+    off_x: npt.NDArray[np.float32],
+    off_y: npt.NDArray[np.float32],
+) -> npt.NDArray[np.float32]:
+    """Return the weighted least-squares plane z = a + b x + c y of each patch at (off_x, off_y)."""
+    count = weight.sum(axis=1)
+    mx = (weight * _DX).sum(axis=1) / count
+    my = (weight * _DY).sum(axis=1) / count
+    mz = (weight * patch).sum(axis=1) / count
+    dx, dy, dz = _DX - mx[:, None], _DY - my[:, None], patch - mz[:, None]
+    # Normal equations of the two slopes (2x2 per patch), solved in closed form.
+    sxx, syy, sxy = (weight * dx * dx).sum(1), (weight * dy * dy).sum(1), (weight * dx * dy).sum(1)
+    sxz, syz = (weight * dx * dz).sum(1), (weight * dy * dz).sum(1)
+    det = sxx * syy - sxy * sxy
+    safe = np.where(np.abs(det) > 1e-9, det, 1.0)
+    b = np.where(np.abs(det) > 1e-9, (sxz * syy - syz * sxy) / safe, 0.0)
+    c = np.where(np.abs(det) > 1e-9, (syz * sxx - sxz * sxy) / safe, 0.0)
+    return np.asarray(mz + b * (off_x - mx) + c * (off_y - my), np.float32)
 
 
 def thumbnail(gray: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:

@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import RgbdFrame
-from process.loop_closure import Edge, PoseGraph, find_loop, loop_candidates
+from process.loop_closure import Edge, LoopCloser, PoseGraph
 from process.odometry_dense import DenseAligner, pose_difference
 from process.odometry_features import (
     FeatureExtractor,
@@ -24,7 +24,7 @@ from process.odometry_features import (
 )
 
 if TYPE_CHECKING:
-    from process.odometry import OdometryConfig
+    from process.odometry_config import OdometryConfig
 
 _WEAK_INFORMATION = 1e-3  # ties a new segment to the old one without constraining it
 
@@ -96,7 +96,7 @@ class Tracker:
         self._lost = 0
         self._failure = ""
         self._segment = 0
-        self._cooldown = 0
+        self.loops = LoopCloser(cfg, pnp=self.pnp, graph=graph, keyframes=keyframes)
 
     def step(
         self, gray: npt.NDArray[np.uint8], depth: npt.NDArray[np.float32], frame: RgbdFrame
@@ -200,7 +200,11 @@ class Tracker:
         moved_m, turned_deg = pose_difference(np.eye(4), kf_from_camera)
         if moved_m > cfg.keyframe_translation_m or turned_deg > cfg.keyframe_rotation_deg:
             return True
-        if n_inliers < cfg.keyframe_min_inliers:
+        if kf.first_inliers == 0:
+            kf.first_inliers = n_inliers
+        if n_inliers < max(
+            cfg.keyframe_min_inliers, cfg.keyframe_min_inlier_ratio * kf.first_inliers
+        ):
             return True
         share = visible_share(kf.points, rigid_inverse(kf_from_camera), self.extractor.intrinsics)
         return share < cfg.keyframe_min_overlap
@@ -253,7 +257,7 @@ class Tracker:
         kf.dense = dense
         support = information_from_points(parent.points[found.train[found.pnp.inliers]])
         self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, support, False))
-        return self._close_loop(kf)
+        return self.loops.close(kf)
 
     def _refine(
         self, source: Any, target: Any, kf_from_camera: npt.NDArray[np.float64]
@@ -325,46 +329,6 @@ class Tracker:
         nan = np.full((len(xy), 2), np.nan, np.float32)
         mask = np.zeros(len(xy), bool)
         return TrackState(ref, self._kf_from_camera.copy(), False, status, 0, xy, mask, nan, event)
-
-    # -- loop closure --------------------------------------------------------------------------
-    def _close_loop(self, kf: Keyframe) -> str:
-        """Search a loop from a new keyframe; on one, optimise the graph and describe it."""
-        cfg = self.cfg
-        if not cfg.loop_closure:
-            return ""
-        if self._cooldown > 0:
-            self._cooldown -= 1
-            return ""
-        ids = loop_candidates(
-            kf,
-            self.keyframes,
-            poses=self.graph.poses,
-            min_gap=cfg.loop_min_gap,
-            count=cfg.loop_candidates,
-            min_similarity=cfg.loop_min_similarity,
-            radius_m=cfg.loop_search_radius_m,
-        )
-        candidates = [self.keyframes[i] for i in ids]
-        found = find_loop(
-            kf,
-            candidates,
-            pnp=self.pnp,
-            match_ratio=cfg.match_ratio,
-            min_inliers=cfg.loop_min_inliers,
-        )
-        if found is None:
-            return ""
-        edge, n_inliers = found
-        self.graph.add_edge(edge)
-        moved_m, kept = self.graph.optimise(
-            max_correspondence_m=cfg.loop_max_correspondence_m,
-            prune_threshold=cfg.loop_prune_threshold,
-        )
-        self._cooldown = cfg.loop_cooldown
-        return (
-            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers);"
-            f" {kept} loop edge(s) kept, keyframes moved by up to {moved_m:.3f} m"
-        )
 
 
 def _match_arrays(

@@ -18,7 +18,7 @@ import numpy.typing as npt
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
-from capture.recording import Intrinsics, RgbdFrame
+from capture.recording import Extrinsics, Intrinsics, RgbdFrame
 
 K_VGA = Intrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)
 ROOM_MIN = (-3.0, -1.2, -3.0)
@@ -158,3 +158,79 @@ K_QVGA = Intrinsics(320, 240, 262.5, 262.5, 159.75, 119.75)
 def track_all(odometry: Any, frames: list[RgbdFrame]) -> list[Any]:
     """Track frames (depth already in the colour camera) and return the TrackResults."""
     return [odometry.track(f, f.depth_m) for f in frames]
+
+
+def _rs_intrinsics(rs: Any, k: Intrinsics) -> Any:
+    intr = rs.intrinsics()  # type: ignore[attr-defined]
+    intr.width, intr.height, intr.fx, intr.fy, intr.ppx, intr.ppy = (
+        k.width,
+        k.height,
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy,
+    )
+    intr.model = rs.distortion.brown_conrady  # type: ignore[attr-defined]
+    intr.coeffs = [0.0] * 5
+    return intr
+
+
+def rs_align(
+    depth_mm: npt.NDArray[np.uint16],
+    *,
+    depth_k: Intrinsics,
+    color_k: Intrinsics,
+    color_from_depth: npt.NDArray[np.float64],
+) -> npt.NDArray[np.uint16]:
+    """Push one depth and one colour frame through a software device and rs.align(color)."""
+    import pyrealsense2 as rs
+
+    device = rs.software_device()
+    sensors, profiles = [], []
+    for uid, (name, stream, fmt, bpp, k) in enumerate(
+        [
+            ("Depth", rs.stream.depth, rs.format.z16, 2, depth_k),
+            ("Color", rs.stream.color, rs.format.rgb8, 3, color_k),
+        ]
+    ):
+        sensor = device.add_sensor(name)
+        vs = rs.video_stream()
+        vs.type, vs.index, vs.uid, vs.width, vs.height = stream, 0, uid, k.width, k.height
+        vs.fps, vs.bpp, vs.fmt, vs.intrinsics = 30, bpp, fmt, _rs_intrinsics(rs, k)
+        profiles.append(sensor.add_video_stream(vs))
+        sensors.append(sensor)
+    sensors[0].add_read_only_option(rs.option.depth_units, 0.001)
+    extrinsics = rs.extrinsics()
+    rot, trans = Extrinsics(color_from_depth).to_librealsense()
+    extrinsics.rotation, extrinsics.translation = rot, trans
+    profiles[0].register_extrinsics_to(profiles[1], extrinsics)
+    device.create_matcher(rs.matchers.default)
+    syncer = rs.syncer()
+    for sensor, profile in zip(sensors, profiles, strict=True):
+        sensor.open(profile)
+        sensor.start(syncer)
+    images: list[npt.NDArray[np.uint8] | npt.NDArray[np.uint16]] = [
+        depth_mm,
+        np.zeros((color_k.height, color_k.width, 3), np.uint8),
+    ]
+    for number in (1, 2):
+        for sensor, profile, image in zip(sensors, profiles, images, strict=True):
+            frame = rs.software_video_frame()
+            frame.pixels, frame.bpp = (
+                image.tobytes(),
+                image.itemsize * (image.shape[2] if image.ndim == 3 else 1),
+            )
+            frame.stride = image.shape[1] * frame.bpp
+            frame.timestamp, frame.frame_number = number * 33.3, number
+            frame.domain = rs.timestamp_domain.hardware_clock
+            frame.profile = profile.as_video_stream_profile()
+            if image.ndim == 2:
+                frame.depth_units = 0.001
+            sensor.on_video_frame(frame)
+    frames = syncer.wait_for_frames(5000)
+    aligned = rs.align(rs.stream.color).process(frames)
+    out = np.array(aligned.get_depth_frame().get_data(), np.uint16)
+    for sensor in sensors:
+        sensor.stop()
+        sensor.close()
+    return out

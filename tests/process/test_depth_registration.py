@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pytest
+from helpers_odometry import rs_align
 from scipy.spatial.transform import Rotation
 
 from capture.recording import Extrinsics, Intrinsics, RgbdFrame
@@ -35,78 +36,13 @@ def _scene_mm() -> npt.NDArray[np.uint16]:
     return depth
 
 
-def _rs_intrinsics(rs: object, k: Intrinsics) -> object:
-    intr = rs.intrinsics()  # type: ignore[attr-defined]
-    intr.width, intr.height, intr.fx, intr.fy, intr.ppx, intr.ppy = (
-        k.width,
-        k.height,
-        k.fx,
-        k.fy,
-        k.cx,
-        k.cy,
-    )
-    intr.model = rs.distortion.brown_conrady  # type: ignore[attr-defined]
-    intr.coeffs = [0.0] * 5
-    return intr
-
-
-def _rs_align(depth_mm: npt.NDArray[np.uint16]) -> npt.NDArray[np.uint16]:
-    """Push one depth and one colour frame through a software device and rs.align(color)."""
-    rs = pytest.importorskip("pyrealsense2")
-    device = rs.software_device()
-    sensors, profiles = [], []
-    for uid, (name, stream, fmt, bpp, k) in enumerate(
-        [
-            ("Depth", rs.stream.depth, rs.format.z16, 2, DEPTH_K),
-            ("Color", rs.stream.color, rs.format.rgb8, 3, COLOR_K),
-        ]
-    ):
-        sensor = device.add_sensor(name)
-        vs = rs.video_stream()
-        vs.type, vs.index, vs.uid, vs.width, vs.height = stream, 0, uid, k.width, k.height
-        vs.fps, vs.bpp, vs.fmt, vs.intrinsics = 30, bpp, fmt, _rs_intrinsics(rs, k)
-        profiles.append(sensor.add_video_stream(vs))
-        sensors.append(sensor)
-    sensors[0].add_read_only_option(rs.option.depth_units, 0.001)
-    extrinsics = rs.extrinsics()
-    rot, trans = Extrinsics(_color_from_depth()).to_librealsense()
-    extrinsics.rotation, extrinsics.translation = rot, trans
-    profiles[0].register_extrinsics_to(profiles[1], extrinsics)
-    device.create_matcher(rs.matchers.default)
-    syncer = rs.syncer()
-    for sensor, profile in zip(sensors, profiles, strict=True):
-        sensor.open(profile)
-        sensor.start(syncer)
-    images: list[npt.NDArray[np.uint8] | npt.NDArray[np.uint16]] = [
-        depth_mm,
-        np.zeros((480, 640, 3), np.uint8),
-    ]
-    for number in (1, 2):
-        for sensor, profile, image in zip(sensors, profiles, images, strict=True):
-            frame = rs.software_video_frame()
-            frame.pixels, frame.bpp = (
-                image.tobytes(),
-                image.itemsize * (image.shape[2] if image.ndim == 3 else 1),
-            )
-            frame.stride = image.shape[1] * frame.bpp
-            frame.timestamp, frame.frame_number = number * 33.3, number
-            frame.domain = rs.timestamp_domain.hardware_clock
-            frame.profile = profile.as_video_stream_profile()
-            if image.ndim == 2:
-                frame.depth_units = 0.001
-            sensor.on_video_frame(frame)
-    frames = syncer.wait_for_frames(5000)
-    aligned = rs.align(rs.stream.color).process(frames)
-    out = np.array(aligned.get_depth_frame().get_data(), np.uint16)
-    for sensor in sensors:
-        sensor.stop()
-        sensor.close()
-    return out
-
-
 def test_registration_matches_librealsense_align() -> None:
     depth_mm = _scene_mm()
-    theirs = _rs_align(depth_mm).astype(np.float32) / 1000.0
+    pytest.importorskip("pyrealsense2")
+    aligned = rs_align(
+        depth_mm, depth_k=DEPTH_K, color_k=COLOR_K, color_from_depth=_color_from_depth()
+    )
+    theirs = aligned.astype(np.float32) / 1000.0
     ours = register_depth(
         depth_mm.astype(np.float32) / 1000.0,
         depth_intrinsics=DEPTH_K,
@@ -238,3 +174,19 @@ def test_depth_config_rejects_bad_values(kwargs: dict[str, object]) -> None:
 
     with pytest.raises(ConfigError):
         DepthConfig(**kwargs)  # type: ignore[arg-type]
+
+
+def test_mean_z_buffer_is_not_biased_by_noise() -> None:
+    rng = np.random.default_rng(1)
+    depth = (2.0 + rng.normal(0.0, 0.02, (480, 640))).astype(np.float32)  # a noisy wall at 2 m
+    kwargs = {
+        "depth_intrinsics": DEPTH_K,
+        "color_intrinsics": COLOR_K,
+        "color_from_depth": np.eye(4),
+    }
+    nearest = register_depth(depth, z_buffer="nearest", **kwargs)  # type: ignore[arg-type]
+    mean = register_depth(depth, z_buffer="mean", **kwargs)  # type: ignore[arg-type]
+    assert np.array_equal(nearest > 0, mean > 0)
+    assert np.median(nearest[nearest > 0]) < 1.99  # the nearest of a few noisy samples
+    assert abs(float(np.median(mean[mean > 0])) - 2.0) < 0.002
+    assert np.std(mean[mean > 0]) < np.std(depth)
