@@ -24,6 +24,7 @@ class RecordingInfo:
     not_rgbd: str = ""  # why the reader refuses it, when frames is None
     device: dict[str, str] = field(default_factory=dict)
     capture: dict[str, str] = field(default_factory=dict)
+    attachments: list[str] = field(default_factory=list)
 
     @property
     def drops(self) -> dict[str, int] | None:
@@ -61,6 +62,7 @@ def describe(path: Path) -> RecordingInfo:
         not_rgbd=reason,
         device=index.metadata.get("device", {}),
         capture=index.metadata.get("capture", {}),
+        attachments=list(index.attachments),
     )
 
 
@@ -90,6 +92,7 @@ def format_info(info: RecordingInfo) -> str:
         f"duration   {info.duration_s:.3f} s",
         f"dropped    {dropped}",
         f"device     {device}",
+        f"attached   {', '.join(info.attachments) or 'nothing'}",
         "topics",
     ]
     width = max((len(t.name) for t in info.topics), default=0)

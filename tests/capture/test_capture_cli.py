@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import write_synthetic_recording
 from helpers_capture import ROOT, SoftCamera
 from typer.testing import CliRunner
 
@@ -115,3 +116,18 @@ def test_a_finished_recording_written_by_the_writer_reads_in_info(tmp_path: Path
     result = runner.invoke(app, ["info", str(path)])
     assert result.exit_code == 0
     assert "frames     none: no colour topic" in result.output
+
+
+def test_info_lists_attachments(tmp_path: Path) -> None:
+    path = write_synthetic_recording(tmp_path / "with_attachment.mcap", frames=2)
+    with_cloud = tmp_path / "cloud.mcap"
+    with RecordingReader(path) as rec, RecordingWriter(with_cloud) as writer:
+        for frame in rec.frames():
+            writer.write_frame(frame)
+        writer.write_attachment(
+            "ground_truth_cloud.ply", b"ply\n", media_type="text/plain", log_ns=1
+        )
+    plain = runner.invoke(app, ["info", str(path)])
+    attached = runner.invoke(app, ["info", str(with_cloud)])
+    assert "attached   nothing" in plain.output.splitlines()
+    assert "attached   ground_truth_cloud.ply" in attached.output.splitlines()
