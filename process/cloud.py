@@ -12,6 +12,7 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import NUM_LABELS
 from process.errors import CloudError
 
 logger = logging.getLogger(__name__)
@@ -225,7 +226,7 @@ def _cloud_from_fields(
         raise CloudError(f"expected vertex fields x y z, found {sorted(names)}: {source}")
     points = np.stack([fields[a] for a in "xyz"], axis=1).astype(np.float32)
     colors = _colors(fields, names, len(points))
-    labels = _integer_field(fields, "label", source, require=require_labels, high=255)
+    labels = _integer_field(fields, "label", source, require=require_labels, high=NUM_LABELS - 1)
     clusters = None
     if "cluster" in names:
         clusters = _integer_field(fields, "cluster", source, require=True, high=2**31 - 1)

@@ -129,7 +129,7 @@ class Fusion:
         xy, flat, z = xy[valid], flat[valid], z[valid]
         camera_points = np.column_stack([xy * z[:, None], z])
         world = camera_points @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
-        weight = confidence.reshape(-1)[flat].astype(np.float32)
+        weight = np.nan_to_num(confidence.reshape(-1)[flat].astype(np.float32))
         weight = np.where(weight >= self.cfg.min_confidence, weight, np.float32(0.0))
         self._accumulate(world, color.reshape(-1, 3)[flat], labels.reshape(-1)[flat], weight)
         self.frames += 1

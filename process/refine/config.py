@@ -56,5 +56,10 @@ class RefineConfig:
         for name, (value, low, high) in checks.items():
             if not low <= value <= high:
                 raise ConfigError(f"refinement.{name} must be in {low}..{high}, got {value}")
+        if 0 < self.plane_sample_points < 3:
+            raise ConfigError(
+                "refinement.plane_sample_points must be 0 (all points) or >= 3, "
+                f"got {self.plane_sample_points}"
+            )
         if self.up is not None and (len(self.up) != 3 or sum(v * v for v in self.up) < 1e-12):
             raise ConfigError(f"refinement.up must be a non-zero 3-vector or absent, got {self.up}")

@@ -9,7 +9,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import NUM_LABELS
 from process.cloud import LabelledCloud
+from process.errors import StageError
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.outliers import sor_inliers
@@ -95,6 +97,11 @@ def refine(
     cloud: LabelledCloud, cfg: RefineConfig, *, up: npt.NDArray[np.float64] | None = None
 ) -> RefineResult:
     """Refine a fused labelled cloud; `up` (gravity-up in the cloud's frame) overrides cfg.up."""
+    if len(cloud) and int(cloud.labels.max()) >= NUM_LABELS:
+        raise StageError(
+            f"refinement expects RECORDING.md label ids 0..{NUM_LABELS - 1}, "
+            f"found {int(cloud.labels.max())}; map the labels first"
+        )
     seconds: dict[str, float] = {}
     start = tick = time.perf_counter()
 

@@ -130,3 +130,12 @@ def test_wrong_array_types_are_refused() -> None:
         LabelledCloud(
             np.zeros((2, 3), np.float32), np.zeros((2, 3), np.uint8), np.zeros(2, np.int64)
         )  # type: ignore[arg-type]
+
+
+def test_labels_outside_the_recording_table_are_refused() -> None:
+    text = (
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+        "property float z\nproperty uchar label\nend_header\n0 0 0 42\n"
+    )
+    with pytest.raises(CloudError, match=r"integer 'label' values in 0\.\.10, found 42"):
+        parse_ply(text.encode(), source="mem")

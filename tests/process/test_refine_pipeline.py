@@ -10,7 +10,7 @@ import pytest
 from helpers_refine import RecordingLogger, grid_patch, labelled
 
 from process.cloud import ply_bytes, read_cloud, write_ply
-from process.errors import CloudError
+from process.errors import CloudError, ConfigError, StageError
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
 from process.refine.synthetic import SyntheticScene, indoor_scene
@@ -133,3 +133,23 @@ def test_refine_and_log_logs_every_step_in_stage_order(office: SyntheticScene) -
     assert ("log_map", "refined") in [c[:2] for c in viz.calls]
     assert len(refined) == section["points"]["final"]
     assert section["phases"]["III"]["all"]["f1"] > 0.9
+
+
+def test_labels_outside_the_recording_table_are_refused() -> None:
+    with pytest.raises(StageError, match=r"label ids 0\.\.10, found 20"):
+        refine(labelled(grid_patch((0.0, 0.2), (0.0, 0.2)), 20), RefineConfig())
+
+
+@pytest.mark.parametrize(
+    "field",
+    [
+        {"dbscan_method": 3},
+        {"k_max": 2},
+        {"plane_distance_m": 0.0},
+        {"plane_sample_points": 2},
+        {"up": (0.0, 0.0, 0.0)},
+    ],
+)
+def test_bad_refine_config_values_are_refused(field: dict[str, object]) -> None:
+    with pytest.raises(ConfigError, match="refinement"):
+        RefineConfig(**field)  # type: ignore[arg-type]
