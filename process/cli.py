@@ -11,7 +11,7 @@ from typing import Annotated, NoReturn
 import typer
 
 app = typer.Typer(
-    help="Replay an MCAP recording offline: odometry, segmentation, fusion, refinement, evaluation.",
+    help="Replay an MCAP recording offline: odometry, segmentation, fusion, refinement.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -24,7 +24,7 @@ Examples:
 
   semreplay-process run rec.mcap --out out --stages odometry --no-viz
 
-  semreplay-process run rec.mcap --out out --config samples/sample.toml --weights samples/segmentation.pt
+  semreplay-process run rec.mcap --out out --config samples/sample.toml --weights ckpt.pt
 """
 
 
@@ -35,7 +35,8 @@ def _fail(message: str) -> NoReturn:
 
 def _setup_logging(verbose: bool) -> None:
     logging.basicConfig(
-        level=logging.DEBUG if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+        level=logging.DEBUG if verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
     )
 
 
@@ -45,7 +46,10 @@ def run(
     out: Annotated[Path, typer.Option("--out", help="output folder")],
     config: Annotated[Path | None, typer.Option(help="TOML config overriding the defaults")] = None,
     stages: Annotated[
-        str, typer.Option(help="last stage to run, or a comma list: odometry,segmentation,fusion,refinement")
+        str,
+        typer.Option(
+            help="last stage to run, or a comma list: odometry,segmentation,fusion,refinement"
+        ),
     ] = "refinement",
     weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
     device: Annotated[str, typer.Option(help="auto | cpu | cuda")] = "auto",
@@ -68,7 +72,13 @@ def run(
 
 
 def _run(
-    recording: Path, out: Path, config: Path | None, stages: str, weights: Path | None, device: str, no_viz: bool
+    recording: Path,
+    out: Path,
+    config: Path | None,
+    stages: str,
+    weights: Path | None,
+    device: str,
+    no_viz: bool,
 ) -> None:
     from rich.console import Console
 
@@ -81,7 +91,11 @@ def _run(
     stage_list = resolve_stages(stages)
     out.mkdir(parents=True, exist_ok=True)
     rrd = out / outputs.RRD
-    viz = NullLogger() if no_viz else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem)
+    viz = (
+        NullLogger()
+        if no_viz
+        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem)
+    )
     pipeline = ReplayPipeline(
         recording, out_dir=out, cfg=cfg, stages=stage_list, viz=viz, weights=weights, device=device
     )
@@ -106,7 +120,7 @@ def _run(
 
 @app.command(
     epilog="Examples:\n\n  semreplay-process refine cloud.ply --out out\n\n"
-    "  semreplay-process refine scan.pcd --out out --config samples/sample.toml --ground-truth gt.ply"
+    "  semreplay-process refine scan.pcd --out out --config samples/sample.toml"
 )
 def refine(
     cloud: Annotated[Path, typer.Argument(help="labelled cloud (.ply with x y z label, or .pcd)")],
@@ -139,7 +153,7 @@ def refine(
 
 
 @app.command(
-    epilog="Examples:\n\n  semreplay-process train sim1.mcap sim2.mcap --out ckpt.pt --val sim3.mcap --epochs 10"
+    epilog="Examples:\n\n  semreplay-process train a.mcap b.mcap --out ckpt.pt --val c.mcap"
 )
 def train(
     recordings: Annotated[list[Path], typer.Argument(help="recordings with /ground_truth/labels")],

@@ -45,7 +45,8 @@ def load_config(path: Path | None) -> ReplayConfig:
         raise ConfigError(f"config file not found: {path}") from err
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ConfigError(f"config is not valid TOML ({err}): {path}") from err
-    return _build(ReplayConfig, data, where="", path=Path(path))
+    cfg: ReplayConfig = _build(ReplayConfig, data, where="", path=Path(path))
+    return cfg
 
 
 def _build(cls: type[Any], data: dict[str, Any], *, where: str, path: Path) -> Any:
@@ -121,10 +122,12 @@ def _toml_value(value: Any) -> str:
 
 
 def resolve_stages(spec: str) -> tuple[str, ...]:
-    """Return the stages to run for `--stages` (a stage name, or a comma list; later ones imply earlier ones)."""
+    """Return the stages for `--stages`: a name or a comma list; later ones imply earlier ones."""
     names = [s.strip() for s in spec.split(",") if s.strip()]
     bad = [n for n in names if n not in STAGES]
     if bad or not names:
-        raise ConfigError(f"unknown stage(s) {bad or [spec]}; valid stages, in order: {', '.join(STAGES)}")
+        raise ConfigError(
+            f"unknown stage(s) {bad or [spec]}; valid stages, in order: {', '.join(STAGES)}"
+        )
     last = max(STAGES.index(n) for n in names)
     return STAGES[: last + 1]

@@ -31,7 +31,7 @@ def atomic_path(path: Path) -> Iterator[Path]:
     tmp = temporary_path(path)
     try:
         yield tmp
-        os.replace(tmp, path)
+        tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
 

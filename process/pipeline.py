@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +23,7 @@ from capture.recording import (
 from process import outputs
 from process.config import ReplayConfig, to_toml
 from process.depth import DepthProcessor
+from process.evaluate import class_counts, confusion_matrix, ratios
 from process.odometry import Odometry
 from process.trajectory import ate_rmse, path_length, rpe, write_tum
 from viz.rerun_log import Logger
@@ -62,6 +65,7 @@ class ReplayPipeline:
         self.progress = progress
         self.result = RunResult(out_dir)
         self._seconds: dict[str, float] = {}
+        self._anchor: npt.NDArray[np.float64] | None = None  # map world from the first camera
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -115,30 +119,40 @@ class ReplayPipeline:
                 self.viz.log_calibration(frame.color_intrinsics)
             self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
             self.viz.log_frame(frame)
-            depth_m = self._timed("depth", lambda f=frame: depth.process(f))
+            with self._timer("depth"):
+                depth_m = depth.process(frame)
             if not frame.aligned:
                 self.viz.log_registered_depth(depth_m)
-            track = self._timed("odometry", lambda f=frame, d=depth_m: odometry.track(f, d))  # type: ignore[union-attr]
-            self._log_track(track)
-            if frame.ground_truth is not None and frame.ground_truth.world_from_camera is not None:
-                gt_poses.append((frame.stamp_ns, frame.ground_truth.world_from_camera))
+            gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
+            if self._anchor is None:
+                # The map's world is the recording's world where it has a first pose (so the map
+                # meets the ground-truth cloud), else the first camera.
+                self._anchor = np.eye(4) if gt_pose is None else gt_pose
+            with self._timer("odometry"):
+                track = odometry.track(frame, depth_m)
+            world_from_camera = self._anchor @ track.world_from_camera
+            self._log_track(track, world_from_camera)
+            if gt_pose is not None:
+                gt_poses.append((frame.stamp_ns, gt_pose))
             if segmenter is not None and track.is_keyframe:
-                self._keyframe(frame, depth_m, track.world_from_camera, segmenter)
+                self._keyframe(frame, depth_m, world_from_camera, segmenter)
         self._frames = frames.n
         self._odometry = odometry
         trajectory = odometry.finish() if odometry is not None else []
-        return trajectory, gt_poses
+        anchor = np.eye(4) if self._anchor is None else self._anchor
+        return [(stamp, anchor @ pose) for stamp, pose in trajectory], gt_poses
 
-    def _timed(self, stage: str, fn: Any) -> Any:
+    @contextmanager
+    def _timer(self, stage: str) -> Iterator[None]:
+        """Add the block's wall time to the stage's total and log it on the timeline."""
         t0 = time.perf_counter()
-        out = fn()
+        yield
         dt = time.perf_counter() - t0
         self._seconds[stage] = self._seconds.get(stage, 0.0) + dt
         self.viz.log_timing(stage, dt)
-        return out
 
-    def _log_track(self, track: Any) -> None:
-        self.viz.log_pose(track.world_from_camera, keyframe=track.is_keyframe)
+    def _log_track(self, track: Any, world_from_camera: npt.NDArray[np.float64]) -> None:
+        self.viz.log_pose(world_from_camera, keyframe=track.is_keyframe)
         self.viz.log_keypoints(track.keypoints_xy, inliers=track.inlier_mask)
         self.viz.log_tracking(track.n_inliers, status=track.status, event=track.event)
 
@@ -154,24 +168,23 @@ class ReplayPipeline:
         world_from_camera: Any,
         segmenter: Any,
     ) -> None:
-        seg = self._timed("segmentation", lambda: segmenter.segment(frame.color))
+        with self._timer("segmentation"):
+            seg = segmenter.segment(frame.color)
         self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
         gt = frame.ground_truth
         if gt is not None and gt.labels is not None:
             self._seg_stats.add(seg.labels, gt.labels)
         self._seg_stats.keyframes += 1
         if "fusion" in self.stages:
-            self._timed(
-                "fusion",
-                lambda: self._fusion.integrate(
+            with self._timer("fusion"):
+                self._fusion.integrate(
                     frame.color,
                     depth_m,
                     seg.labels,
                     seg.confidence,
                     intrinsics=frame.color_intrinsics,
                     world_from_camera=world_from_camera,
-                ),
-            )
+                )
 
     # -- after the frames ----------------------------------------------------------------
     def _finish_odometry(
@@ -227,8 +240,15 @@ class ReplayPipeline:
         self.result.metrics["refinement"] = section
 
     def _up_vector(self) -> npt.NDArray[np.float64] | None:
-        """Return world up from the first pose: the camera's -y axis (optical frame, y down)."""
-        return None
+        """Return a hint of world up: the first camera's -y axis (optical y points down).
+
+        Refinement replaces it by the normal of the largest plane within 30 degrees of it, so a
+        camera held a little tilted at the start still gives a level floor.
+        """
+        if self._anchor is None:
+            return None
+        up: npt.NDArray[np.float64] = self._anchor[:3, :3] @ np.array([0.0, -1.0, 0.0])
+        return up
 
     def _write_config(self) -> None:
         path = self.out_dir / outputs.CONFIG
@@ -244,9 +264,7 @@ class _SegStats:
         self.confusion = np.zeros((len(LABEL_NAMES), len(LABEL_NAMES)), np.int64)
 
     def add(self, pred: npt.NDArray[np.uint8], gt: npt.NDArray[np.uint8]) -> None:
-        n = len(LABEL_NAMES)
-        idx = gt.astype(np.int64).ravel() * n + pred.astype(np.int64).ravel()
-        self.confusion += np.bincount(idx, minlength=n * n).reshape(n, n)
+        self.confusion += confusion_matrix(pred, gt)
 
     def summary(self, seconds: float) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -257,15 +275,8 @@ class _SegStats:
         }
         if self.confusion.sum() == 0:
             return out
-        tp = np.diag(self.confusion).astype(np.float64)
-        fp = self.confusion.sum(axis=0) - tp
-        fn = self.confusion.sum(axis=1) - tp
-        present = self.confusion.sum(axis=1) > 0
-        iou = {
-            LABEL_NAMES[c]: float(tp[c] / (tp[c] + fp[c] + fn[c]))
-            for c in range(1, len(LABEL_NAMES))
-            if present[c]
-        }
+        present = [c for c in range(1, len(LABEL_NAMES)) if self.confusion[c].sum() > 0]
+        iou = {LABEL_NAMES[c]: ratios(*class_counts(self.confusion, c))["iou"] for c in present}
         out["iou_2d"] = iou
         out["miou_2d"] = float(np.mean(list(iou.values()))) if iou else None
         return out
