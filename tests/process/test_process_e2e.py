@@ -1,0 +1,223 @@
+"""`semreplay-process run` end to end on a simulated recording: every output, checked."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import open3d as o3d
+import pytest
+from helpers_viz import read_rrd, rerun_verify
+from typer.testing import CliRunner
+
+from capture.recording import RecordingReader, RecordingWriter
+from process import outputs
+from process.cli import app
+from process.cloud import read_cloud
+from process.pipeline import ReplayPipeline
+from process.trajectory import read_tum
+
+runner = CliRunner()
+OUTPUTS = (
+    outputs.RRD,
+    outputs.MAP_FUSED,
+    outputs.MAP_REFINED,
+    outputs.TRAJECTORY,
+    outputs.METRICS,
+    outputs.CONFIG,
+)
+PER_FRAME_ENTITIES = (
+    "/world/camera",
+    "/world/camera/image/rgb",
+    "/world/camera/image/depth",
+    "/world/camera/image/keypoints",
+)
+PER_STAGE_ENTITIES = (
+    "/world/map/fused",
+    "/world/map/refined",
+    "/world/refine/planes",
+    "/world/refine/outliers",
+    "/world/refine/clusters",
+)
+
+
+@pytest.fixture(scope="module")
+def run_twice(sim_recording: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Run the whole job twice into one folder; return the folder and the first run's mtimes."""
+    out = tmp_path_factory.mktemp("run")
+    first = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
+    assert first.exit_code == 0, first.output
+    mtimes = {name: (out / name).stat().st_mtime_ns for name in OUTPUTS}
+    second = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
+    assert second.exit_code == 0, second.output
+    return {"out": out, "mtimes": mtimes, "output": second.output}
+
+
+def test_every_output_is_written_and_replaced_whole(run_twice: dict[str, Any]) -> None:
+    out: Path = run_twice["out"]
+    assert sorted(p.name for p in out.iterdir()) == sorted(OUTPUTS)  # no temporary files left
+    for name in OUTPUTS:
+        assert (out / name).stat().st_mtime_ns > run_twice["mtimes"][name], name
+    assert f"semreplay-view {out / outputs.RRD}" in run_twice["output"]
+
+
+def test_the_rrd_verifies_and_holds_the_layout(run_twice: dict[str, Any]) -> None:
+    rrd = run_twice["out"] / outputs.RRD
+    assert rerun_verify(rrd).returncode == 0
+    contents = read_rrd(rrd)
+    for entity in PER_FRAME_ENTITIES:
+        assert {"frame", "capture_time"} <= contents.timelines(entity), entity
+    for entity in ("/world/camera/image/segmentation", "/world/camera/image/depth_registered"):
+        assert "frame" in contents.timelines(entity), entity
+    for entity in PER_STAGE_ENTITIES:
+        assert "stage" in contents.timelines(entity), entity
+    entities = contents.entities()
+    for entity in ("/world/trajectory/estimated", "/world/trajectory/ground_truth", "/logs"):
+        assert entity in entities, entity
+    assert any(e.startswith("/plots/dbscan") for e in entities)
+    assert any(e.startswith("/plots/timing") for e in entities)
+    assert contents.rows[("/world/camera/image/rgb", "frame")] == 30
+
+
+def test_the_clouds_load_with_their_label_fields(run_twice: dict[str, Any]) -> None:
+    out: Path = run_twice["out"]
+    for name in (outputs.MAP_FUSED, outputs.MAP_REFINED):
+        pcd = o3d.io.read_point_cloud(str(out / name))
+        cloud = read_cloud(out / name)
+        assert len(pcd.points) == len(cloud) > 1000
+        assert np.allclose(np.asarray(pcd.points), cloud.points, atol=1e-5)
+        assert set(np.unique(cloud.labels)) - {0}, name
+    header = (out / outputs.MAP_REFINED).read_bytes()[:400].decode("latin-1")
+    assert "property uchar label" in header
+    assert "property int cluster" in header
+
+
+def test_the_trajectory_is_tum_and_near_the_ground_truth(
+    run_twice: dict[str, Any], sim_recording: Path
+) -> None:
+    stamps, poses = read_tum(run_twice["out"] / outputs.TRAJECTORY)
+    with RecordingReader(sim_recording) as rec:
+        truth = {
+            f.stamp_ns: f.ground_truth.world_from_camera for f in rec.frames() if f.ground_truth
+        }
+    assert len(stamps) == 30
+    gt = np.array([truth[int(s)] for s in stamps])
+    assert np.allclose(poses[0], gt[0], atol=1e-6)  # the map lives in the recording's world
+    assert np.max(np.linalg.norm(poses[:, :3, 3] - gt[:, :3, 3], axis=1)) < 0.10
+
+
+def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
+    metrics = json.loads((run_twice["out"] / outputs.METRICS).read_text())
+    assert set(metrics) == {"odometry", "segmentation", "refinement", "seconds"}
+    odo = metrics["odometry"]
+    assert {"frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"} <= set(odo)
+    assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
+    seg = metrics["segmentation"]
+    assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d"} <= set(seg)
+    assert 0.0 <= seg["miou_2d"] <= 1.0
+    phases = metrics["refinement"]["phases"]
+    assert set(phases) == {"I", "II", "III"}
+    for per_class in phases.values():
+        assert set(per_class["all"]) == {"iou", "precision", "recall", "f1"}
+    for params in metrics["refinement"]["dbscan"].values():
+        assert {"k", "eps_m", "min_pts"} <= set(params)
+    assert set(metrics["seconds"]) >= {"depth", "odometry", "segmentation", "fusion", "refinement"}
+
+
+def test_a_recording_without_ground_truth_runs_and_says_so(
+    recording: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    bare = tmp_path / "bare.mcap"
+    with RecordingReader(recording) as rec, RecordingWriter(bare) as writer:
+        writer.write_calibration(next(rec.frames()).depth_to_color, stamp_ns=1)  # type: ignore[arg-type]
+        for frame in rec.frames():
+            writer.write_color(
+                frame.color, stamp_ns=frame.stamp_ns, intrinsics=frame.color_intrinsics
+            )
+            depth_mm = np.round(frame.depth_m * 1000).astype(np.uint16)
+            writer.write_depth(depth_mm, stamp_ns=frame.stamp_ns, intrinsics=frame.depth_intrinsics)
+    out = tmp_path / "out"
+    with caplog.at_level("INFO"):
+        result = runner.invoke(app, ["run", str(bare), "--out", str(out), "--stages", "odometry"])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / outputs.METRICS).read_text())
+    assert metrics["odometry"]["frames"] == 5
+    assert "ate_rmse_m" not in metrics["odometry"]
+    assert "no ground truth" in caplog.text
+
+
+def test_an_unfinished_recording_replays_its_recovered_frames(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    cut = tmp_path / "cut.mcap"
+    data = sim_recording.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    out = tmp_path / "out"
+    result = runner.invoke(
+        app, ["run", str(cut), "--out", str(out), "--stages", "odometry", "--no-viz"]
+    )
+    assert result.exit_code == 0, result.output
+    frames = json.loads((out / outputs.METRICS).read_text())["odometry"]["frames"]
+    assert 5 <= frames < 30
+
+
+def test_ctrl_c_leaves_no_partial_file_and_says_what_was_written(
+    sim_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def interrupt(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ReplayPipeline, "_keyframe", interrupt)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
+    assert result.exit_code == 1
+    assert "interrupted; complete files written: config.toml" in result.output
+    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["run", "absent.mcap", "--out", "o"], "error: recording not found: absent.mcap"),
+        (["run", "{nav2}", "--out", "o"], "error: no colour topic"),
+        (["run", "{rec}", "--out", "o", "--stages", "slam"], "error: unknown stage(s) ['slam']"),
+        (["run", "{rec}", "--out", "o", "--weights", "absent.pt"], "error: segmentation weights"),
+        (["refine", "absent.ply", "--out", "o"], "error: "),
+    ],
+)
+def test_bad_input_is_one_line(
+    args: list[str], message: str, recording: Path, shared_data: Path, tmp_path: Path
+) -> None:
+    nav2 = shared_data / "ros2_other" / "nav2_turtlebot.mcap"
+    args = [a.format(rec=recording, nav2=nav2) for a in args]
+    args = [str(tmp_path / a) if a == "o" else a for a in args]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(message), result.output
+
+
+def test_refine_command_on_a_labelled_cloud(run_twice: dict[str, Any], tmp_path: Path) -> None:
+    fused = run_twice["out"] / outputs.MAP_FUSED
+    out = tmp_path / "refined"
+    result = runner.invoke(app, ["refine", str(fused), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == [
+        outputs.CONFIG,
+        outputs.MAP_REFINED,
+        outputs.METRICS,
+    ]
+    assert len(read_cloud(out / outputs.MAP_REFINED)) <= len(read_cloud(fused))
+
+
+def test_python_dash_m_is_the_same_program() -> None:
+    import subprocess
+    import sys
+
+    result = subprocess.run(
+        [sys.executable, "-m", "process", "--help"], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0
+    assert "run" in result.stdout and "refine" in result.stdout and "train" in result.stdout
