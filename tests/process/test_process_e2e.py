@@ -84,7 +84,7 @@ def test_the_rrd_verifies_and_holds_the_layout(run_twice: dict[str, Any]) -> Non
 def test_the_clouds_load_with_their_label_fields(run_twice: dict[str, Any]) -> None:
     out: Path = run_twice["out"]
     for name in (outputs.MAP_FUSED, outputs.MAP_REFINED):
-        pcd = o3d.io.read_point_cloud(str(out / name))
+        pcd = o3d.io.read_point_cloud(out / name)
         cloud = read_cloud(out / name)
         assert len(pcd.points) == len(cloud) > 1000
         assert np.allclose(np.asarray(pcd.points), cloud.points, atol=1e-5)
