@@ -47,7 +47,7 @@ _RANGES: Final[dict[str, tuple[float, float]]] = {
 class OdometryConfig:
     """Settings of the visual odometry; defaults suit a D435 at 640x480, 30 frames/s."""
 
-    n_features: int = 1000  # ORB features per frame
+    n_features: int = 1500  # ORB features per frame
     orb_scale_factor: float = 1.2
     orb_levels: int = 8
     fast_threshold: int = 20
