@@ -68,7 +68,7 @@ def _image() -> npt.NDArray[np.uint8]:
 def _gflops(model: torch.nn.Module, height: int, width: int) -> float:
     counter = FlopCounterMode(display=False)
     with counter, torch.no_grad():
-        model(torch.zeros(1, 3, height, width))
+        model.eval()(torch.zeros(1, 3, height, width))
     return counter.get_total_flops() / 1e9
 
 
