@@ -15,6 +15,7 @@ _RANGES: Final[dict[str, tuple[float, float]]] = {
     "orb_levels": (1, 16),
     "fast_threshold": (1, 100),
     "match_ratio": (0.1, 1.0),
+    "guided_radius_px": (0.0, 500.0),
     "min_depth_m": (0.0, 100.0),
     "max_depth_m": (0.1, 100.0),
     "ransac_reprojection_px": (0.1, 20.0),
@@ -52,12 +53,14 @@ class OdometryConfig:
     orb_levels: int = 8
     fast_threshold: int = 20
     match_ratio: float = 0.8  # Lowe's ratio test on Hamming distances
+    guided_radius_px: float = 20.0  # match by projection within this radius (0: all against all)
     min_depth_m: float = 0.2  # features outside this depth range get no 3-D point
     max_depth_m: float = 6.0
     ransac_reprojection_px: float = 2.0
     ransac_iterations: int = 200
     ransac_confidence: float = 0.999
     min_inliers: int = 20  # fewer PnP inliers: tracking is lost
+    depth_refine: bool = True  # refine each PnP pose with the current frame's depth too
     max_step_m: float = 0.3  # a larger jump between consecutive frames is rejected as wrong
     keyframe_translation_m: float = 0.15
     keyframe_rotation_deg: float = 10.0

@@ -8,28 +8,19 @@ from typing import Any
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
 from capture.recording import Intrinsics
 
 THUMB_SIZE = (32, 24)  # (w, h) of the keyframe thumbnails used for place recognition
 _LIFT_RADIUS = 2  # keypoint depth from the 5x5 neighbourhood
+_PRIOR_GATE = 4.0  # matches within this many RANSAC thresholds of the prior seed its hypothesis
+_PRIOR_SHARE = 0.8  # the prior's hypothesis wins with at least this share of RANSAC's inliers
+_GUIDED_NEIGHBOURS = 32  # nearest current keypoints compared with each projected reference
+_MAX_HAMMING = 64  # of 256 bits: ORB descriptors further apart are not the same point
 _DY, _DX = (
     g.ravel() for g in np.mgrid[-_LIFT_RADIUS : _LIFT_RADIUS + 1, -_LIFT_RADIUS : _LIFT_RADIUS + 1]
 )
-
-
-@dataclass(frozen=True, slots=True)
-class Features:
-    """ORB features of one image, with 3-D points where the depth is usable."""
-
-    xy: npt.NDArray[np.float32]  # (N, 2) pixels
-    descriptors: npt.NDArray[np.uint8]  # (N, 32)
-    points: npt.NDArray[np.float32]  # (N, 3) camera frame, NaN where depth is unusable
-
-    @property
-    def has_depth(self) -> npt.NDArray[np.bool_]:
-        """Return which features have a 3-D point."""
-        return np.isfinite(self.points[:, 2])
 
 
 @dataclass(slots=True)
@@ -175,6 +166,60 @@ def thumbnail(gray: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     return small / norm if norm > 1e-6 else small
 
 
+def guided_match(
+    points: npt.NDArray[np.float32],
+    descriptors: npt.NDArray[np.uint8],
+    xy: npt.NDArray[np.float32],
+    query: npt.NDArray[np.uint8],
+    *,
+    camera_from_points: npt.NDArray[np.float64],
+    intrinsics: Intrinsics,
+    radius_px: float,
+    ratio: float,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Match reference features to the current ones found near where a predicted pose puts them.
+
+    Like ORB-SLAM's search by projection: each reference point is projected with the prediction
+    and compared only with the current keypoints within radius_px, so a repeated pattern
+    elsewhere in the image cannot claim it. Returns (current index, reference index).
+    """
+    empty = np.zeros(0, np.int64), np.zeros(0, np.int64)
+    if len(points) == 0 or len(xy) < 2:
+        return empty
+    p = points @ camera_from_points[:3, :3].T.astype(np.float32) + camera_from_points[:3, 3].astype(
+        np.float32
+    )
+    front = np.flatnonzero(p[:, 2] > 0.05)
+    uv = np.stack(
+        [
+            p[front, 0] / p[front, 2] * intrinsics.fx + intrinsics.cx,
+            p[front, 1] / p[front, 2] * intrinsics.fy + intrinsics.cy,
+        ],
+        axis=1,
+    )
+    k = min(_GUIDED_NEIGHBOURS, len(xy))
+    dist_px, near = cKDTree(xy).query(uv, k=k, distance_upper_bound=radius_px)
+    valid = np.isfinite(dist_px)
+    near = np.where(valid, near, 0)
+    # Hamming distances of each reference descriptor to its candidates: popcount of the XOR.
+    ref = descriptors[front].view(np.uint64)  # (M, 4)
+    cur = query.view(np.uint64)  # (N, 4)
+    hamming = np.bitwise_count(ref[:, None, :] ^ cur[near]).sum(axis=2).astype(np.float32)
+    hamming[~valid] = np.inf
+    order = np.argsort(hamming, axis=1)
+    rows = np.arange(len(front))
+    best = hamming[rows, order[:, 0]]
+    second = hamming[rows, order[:, 1]] if k > 1 else np.full(len(front), np.inf, np.float32)
+    ok = (best <= _MAX_HAMMING) & (best < ratio * second)
+    cur_idx = near[rows, order[:, 0]][ok]
+    ref_idx = front[ok]
+    # One reference feature per current keypoint: the closest descriptor wins.
+    by_distance = np.argsort(best[ok], kind="stable")
+    _, first = np.unique(cur_idx[by_distance], return_index=True)
+    keep = by_distance[first]
+    return cur_idx[keep].astype(np.int64), ref_idx[keep].astype(np.int64)
+
+
 def match(
     query: npt.NDArray[np.uint8], train: npt.NDArray[np.uint8], *, ratio: float
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -201,14 +246,45 @@ class PnpSolver:
     confidence: float
 
     def solve(
-        self, points: npt.NDArray[np.float32], xy: npt.NDArray[np.float32], *, min_inliers: int
+        self,
+        points: npt.NDArray[np.float32],
+        xy: npt.NDArray[np.float32],
+        *,
+        min_inliers: int,
+        prior: npt.NDArray[np.float64] | None = None,
     ) -> PnpResult | None:
-        """Return the pose mapping reference points onto pixels, or None with < min_inliers."""
+        """Return the pose mapping reference points onto pixels, or None with < min_inliers.
+
+        With a prior (the pose predicted by the camera's last motion) a second hypothesis is
+        grown from the matches that the prior already explains. On repetitive texture (floor
+        planks, book spines) RANSAC can find a consensus of matches shifted by one period, as
+        large as the true one; the prior's hypothesis wins unless it has clearly fewer inliers.
+        """
         if len(points) < max(min_inliers, 6):
             return None
         obj = np.ascontiguousarray(points, np.float64)
         img = np.ascontiguousarray(xy, np.float64)
-        ok, rvec_guess, tvec_guess, inliers = cv2.solvePnPRansac(
+        seed = self._ransac(obj, img, min_inliers)
+        found = self._refine(obj, img, seed, min_inliers) if seed is not None else None
+        if prior is None:
+            return found
+        rvec = np.asarray(cv2.Rodrigues(prior[:3, :3])[0], np.float64)
+        tvec = prior[:3, 3].reshape(3, 1).copy()
+        err = _reprojection_errors(obj, img, rvec, tvec, self.camera_matrix, self.dist)
+        gated = np.flatnonzero(err < _PRIOR_GATE * self.reprojection_px).astype(np.int64)
+        if len(gated) < min_inliers:
+            return found
+        predicted = self._refine(obj, img, (rvec, tvec, gated), min_inliers)
+        if predicted is None:
+            return found
+        if found is None or len(predicted.inliers) >= _PRIOR_SHARE * len(found.inliers):
+            return predicted
+        return found
+
+    def _ransac(
+        self, obj: npt.NDArray[np.float64], img: npt.NDArray[np.float64], min_inliers: int
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int64]] | None:
+        ok, rvec, tvec, inliers = cv2.solvePnPRansac(
             obj,
             img,
             self.camera_matrix,
@@ -221,8 +297,17 @@ class PnpSolver:
         if not ok or inliers is None or len(inliers) < min_inliers:
             return None
         idx = np.asarray(inliers).ravel().astype(np.int64)
-        rvec, tvec = np.asarray(rvec_guess, np.float64), np.asarray(tvec_guess, np.float64)
-        # Two rounds of LM on the inliers, re-selecting them with the refined pose in between.
+        return np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), idx
+
+    def _refine(
+        self,
+        obj: npt.NDArray[np.float64],
+        img: npt.NDArray[np.float64],
+        hypothesis: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int64]],
+        min_inliers: int,
+    ) -> PnpResult | None:
+        """Run LM on the inliers twice, re-selecting them with the refined pose in between."""
+        rvec, tvec, idx = hypothesis
         for _ in range(2):
             refined = cv2.solvePnPRefineLM(
                 obj[idx], img[idx], self.camera_matrix, self.dist, rvec, tvec

@@ -16,12 +16,14 @@ from process.odometry_features import (
     Keyframe,
     PnpResult,
     PnpSolver,
+    guided_match,
     information_from_points,
     match,
     rigid_inverse,
     thumbnail,
     visible_share,
 )
+from process.odometry_refine import refine_with_depth
 
 if TYPE_CHECKING:
     from process.odometry_config import OdometryConfig
@@ -91,6 +93,7 @@ class Tracker:
         self._ref: Keyframe | None = None
         self._kf_from_camera = np.eye(4)
         self._last_world = np.eye(4)
+        self._velocity = np.eye(4)  # the last motion, previous_from_current camera
         self._last_gray: npt.NDArray[np.uint8] | None = None
         self._frozen = False
         self._lost = 0
@@ -123,8 +126,13 @@ class Tracker:
     # -- tracking ------------------------------------------------------------------------------
     def _track(self, kf: Keyframe, image: _Image) -> _Found | None:
         """Return the pose of the image against a keyframe, or None (reason in self._failure)."""
-        q, t = match(image.descriptors, kf.descriptors, ratio=self.cfg.match_ratio)
-        pnp = self.pnp.solve(kf.points[t], image.xy[q], min_inliers=self.cfg.min_inliers)
+        prior = self._predict(kf)
+        q, t = self._match(kf, image, prior)
+        pnp = self.pnp.solve(
+            kf.points[t], image.xy[q], min_inliers=self.cfg.min_inliers, prior=prior
+        )
+        if pnp is not None and self.cfg.depth_refine:
+            pnp = self._with_depth(pnp, kf.points[t], image, q)
         if pnp is None:
             self._failure = (
                 f"{len(image.xy)} features, {len(q)} matches, < {self.cfg.min_inliers} PnP inliers"
@@ -137,6 +145,54 @@ class Tracker:
                 self._failure = f"a jump of {step_m:.2f} m (> max_step_m {self.cfg.max_step_m})"
                 return None
         return _Found(kf, pnp, q, t)
+
+    def _with_depth(
+        self,
+        pnp: PnpResult,
+        points: npt.NDArray[np.float32],
+        image: _Image,
+        query: npt.NDArray[np.int64],
+    ) -> PnpResult:
+        """Refine a PnP pose with the current depth at the inlier keypoints (odometry_refine)."""
+        xy = image.xy[query[pnp.inliers]]
+        depth = self.extractor.lift(xy, image.depth)[:, 2]
+        if int(np.isfinite(depth).sum()) < self.cfg.min_inliers:
+            return pnp
+        pose, _ = refine_with_depth(
+            points[pnp.inliers],
+            self.extractor.normalised(xy),
+            depth,
+            camera_from_reference=pnp.camera_from_reference,
+            focal_px=self.extractor.intrinsics.fx,
+        )
+        return PnpResult(pose, pnp.inliers, pnp.rms_px)
+
+    def _match(
+        self, kf: Keyframe, image: _Image, prior: npt.NDArray[np.float64] | None
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """Match by projection around the predicted pose, else (or if too few) all against all."""
+        cfg = self.cfg
+        if prior is not None and cfg.guided_radius_px > 0:
+            q, t = guided_match(
+                kf.points,
+                kf.descriptors,
+                image.xy,
+                image.descriptors,
+                camera_from_points=prior,
+                intrinsics=self.extractor.intrinsics,
+                radius_px=cfg.guided_radius_px,
+                ratio=cfg.match_ratio,
+            )
+            if len(q) >= 2 * cfg.min_inliers:
+                return q, t
+        return match(image.descriptors, kf.descriptors, ratio=cfg.match_ratio)
+
+    def _predict(self, kf: Keyframe) -> npt.NDArray[np.float64] | None:
+        """Return camera_from_keyframe if the camera keeps its last motion, or None when lost."""
+        if self._lost:
+            return None
+        world = self._last_world @ self._velocity
+        return rigid_inverse(world) @ self.graph.poses[kf.id]
 
     def _relocalise(self, image: _Image) -> _Found | None:
         """Try the recent keyframes and the two that look most alike; keep the best."""
@@ -180,7 +236,9 @@ class Tracker:
         ref = self._ref
         assert ref is not None  # set above
         self._kf_from_camera = kf_from_camera
-        self._last_world = self.graph.poses[ref.id] @ kf_from_camera
+        world = self.graph.poses[ref.id] @ kf_from_camera
+        self._velocity = np.eye(4) if status != "ok" else rigid_inverse(self._last_world) @ world
+        self._last_world = world
         event = "; ".join(e for e in events if e) or None
         return TrackState(
             ref.id,
@@ -318,6 +376,7 @@ class Tracker:
     ) -> TrackState:
         self._kf_from_camera = np.eye(4)
         self._last_world = self.graph.poses[kf.id].copy()
+        self._velocity = np.eye(4)
         nan = np.full((len(xy), 2), np.nan, np.float32)
         return TrackState(
             kf.id, np.eye(4), True, status, 0, xy, np.zeros(len(xy), bool), nan, event
