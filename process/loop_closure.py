@@ -10,7 +10,9 @@ import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
-from process.odometry_features import Keyframe, PnpSolver, information_from_points, match
+from process.odometry_features import Keyframe
+from process.odometry_matching import match
+from process.odometry_pnp import PnpSolver, information_from_points
 
 if TYPE_CHECKING:
     from process.odometry_config import OdometryConfig

@@ -1,4 +1,4 @@
-"""The sparse half of the visual odometry: ORB features with depth, matching, PnP RANSAC."""
+"""ORB features with depth, and what the odometry keeps of a keyframe."""
 
 from __future__ import annotations
 
@@ -8,16 +8,11 @@ from typing import Any
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import Intrinsics
 
 THUMB_SIZE = (32, 24)  # (w, h) of the keyframe thumbnails used for place recognition
 _LIFT_RADIUS = 2  # keypoint depth from the 5x5 neighbourhood
-_PRIOR_GATE = 4.0  # matches within this many RANSAC thresholds of the prior seed its hypothesis
-_PRIOR_SHARE = 0.8  # the prior's hypothesis wins with at least this share of RANSAC's inliers
-_GUIDED_NEIGHBOURS = 32  # nearest current keypoints compared with each projected reference
-_MAX_HAMMING = 64  # of 256 bits: ORB descriptors further apart are not the same point
 _DY, _DX = (
     g.ravel() for g in np.mgrid[-_LIFT_RADIUS : _LIFT_RADIUS + 1, -_LIFT_RADIUS : _LIFT_RADIUS + 1]
 )
@@ -37,20 +32,6 @@ class Keyframe:
     thumbnail: npt.NDArray[np.float32]  # (24 * 32,) zero mean, unit norm
     first_inliers: int = 0  # PnP inliers of the first frame tracked against it
     dense: Any = field(default=None)  # downsampled RGB-D for dense alignment, reference only
-
-
-@dataclass(frozen=True, slots=True)
-class PnpResult:
-    """A pose from 3-D/2-D matches: the reference's points seen by the current camera."""
-
-    camera_from_reference: npt.NDArray[np.float64]  # (4, 4)
-    inliers: npt.NDArray[np.int64]  # indices into the matches given
-    rms_px: float
-
-    @property
-    def reference_from_camera(self) -> npt.NDArray[np.float64]:
-        """Return the inverse pose: the current camera in the reference frame."""
-        return rigid_inverse(self.camera_from_reference)
 
 
 class FeatureExtractor:
@@ -166,196 +147,6 @@ def thumbnail(gray: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     return small / norm if norm > 1e-6 else small
 
 
-def guided_match(
-    points: npt.NDArray[np.float32],
-    descriptors: npt.NDArray[np.uint8],
-    xy: npt.NDArray[np.float32],
-    query: npt.NDArray[np.uint8],
-    *,
-    camera_from_points: npt.NDArray[np.float64],
-    intrinsics: Intrinsics,
-    radius_px: float,
-    ratio: float,
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Match reference features to the current ones found near where a predicted pose puts them.
-
-    Like ORB-SLAM's search by projection: each reference point is projected with the prediction
-    and compared only with the current keypoints within radius_px, so a repeated pattern
-    elsewhere in the image cannot claim it. Returns (current index, reference index).
-    """
-    empty = np.zeros(0, np.int64), np.zeros(0, np.int64)
-    if len(points) == 0 or len(xy) < 2:
-        return empty
-    p = points @ camera_from_points[:3, :3].T.astype(np.float32) + camera_from_points[:3, 3].astype(
-        np.float32
-    )
-    front = np.flatnonzero(p[:, 2] > 0.05)
-    uv = np.stack(
-        [
-            p[front, 0] / p[front, 2] * intrinsics.fx + intrinsics.cx,
-            p[front, 1] / p[front, 2] * intrinsics.fy + intrinsics.cy,
-        ],
-        axis=1,
-    )
-    k = min(_GUIDED_NEIGHBOURS, len(xy))
-    dist_px, near = cKDTree(xy).query(uv, k=k, distance_upper_bound=radius_px)
-    valid = np.isfinite(dist_px)
-    near = np.where(valid, near, 0)
-    # Hamming distances of each reference descriptor to its candidates: popcount of the XOR.
-    ref = descriptors[front].view(np.uint64)  # (M, 4)
-    cur = query.view(np.uint64)  # (N, 4)
-    hamming = np.bitwise_count(ref[:, None, :] ^ cur[near]).sum(axis=2).astype(np.float32)
-    hamming[~valid] = np.inf
-    order = np.argsort(hamming, axis=1)
-    rows = np.arange(len(front))
-    best = hamming[rows, order[:, 0]]
-    second = hamming[rows, order[:, 1]] if k > 1 else np.full(len(front), np.inf, np.float32)
-    ok = (best <= _MAX_HAMMING) & (best < ratio * second)
-    cur_idx = near[rows, order[:, 0]][ok]
-    ref_idx = front[ok]
-    # One reference feature per current keypoint: the closest descriptor wins.
-    by_distance = np.argsort(best[ok], kind="stable")
-    _, first = np.unique(cur_idx[by_distance], return_index=True)
-    keep = by_distance[first]
-    return cur_idx[keep].astype(np.int64), ref_idx[keep].astype(np.int64)
-
-
-def match(
-    query: npt.NDArray[np.uint8], train: npt.NDArray[np.uint8], *, ratio: float
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Return (query index, train index) of matches that pass Lowe's ratio test."""
-    if len(query) < 2 or len(train) < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    pairs = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(query, train, k=2)
-    q, t = [], []
-    for pair in pairs:
-        if len(pair) == 2 and pair[0].distance < ratio * pair[1].distance:
-            q.append(pair[0].queryIdx)
-            t.append(pair[0].trainIdx)
-    return np.array(q, np.int64), np.array(t, np.int64)
-
-
-@dataclass(frozen=True, slots=True)
-class PnpSolver:
-    """PnP RANSAC on 3-D/2-D matches, then Levenberg-Marquardt on the inliers."""
-
-    camera_matrix: npt.NDArray[np.float64]
-    dist: npt.NDArray[np.float64] | None
-    reprojection_px: float
-    iterations: int
-    confidence: float
-
-    def solve(
-        self,
-        points: npt.NDArray[np.float32],
-        xy: npt.NDArray[np.float32],
-        *,
-        min_inliers: int,
-        prior: npt.NDArray[np.float64] | None = None,
-    ) -> PnpResult | None:
-        """Return the pose mapping reference points onto pixels, or None with < min_inliers.
-
-        With a prior (the pose predicted by the camera's last motion) a second hypothesis is
-        grown from the matches that the prior already explains. On repetitive texture (floor
-        planks, book spines) RANSAC can find a consensus of matches shifted by one period, as
-        large as the true one; the prior's hypothesis wins unless it has clearly fewer inliers.
-        """
-        if len(points) < max(min_inliers, 6):
-            return None
-        obj = np.ascontiguousarray(points, np.float64)
-        img = np.ascontiguousarray(xy, np.float64)
-        seed = self._ransac(obj, img, min_inliers)
-        found = self._refine(obj, img, seed, min_inliers) if seed is not None else None
-        if prior is None:
-            return found
-        rvec = np.asarray(cv2.Rodrigues(prior[:3, :3])[0], np.float64)
-        tvec = prior[:3, 3].reshape(3, 1).copy()
-        err = _reprojection_errors(obj, img, rvec, tvec, self.camera_matrix, self.dist)
-        gated = np.flatnonzero(err < _PRIOR_GATE * self.reprojection_px).astype(np.int64)
-        if len(gated) < min_inliers:
-            return found
-        predicted = self._refine(obj, img, (rvec, tvec, gated), min_inliers)
-        if predicted is None:
-            return found
-        if found is None or len(predicted.inliers) >= _PRIOR_SHARE * len(found.inliers):
-            return predicted
-        return found
-
-    def _ransac(
-        self, obj: npt.NDArray[np.float64], img: npt.NDArray[np.float64], min_inliers: int
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int64]] | None:
-        ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-            obj,
-            img,
-            self.camera_matrix,
-            self.dist,
-            iterationsCount=self.iterations,
-            reprojectionError=self.reprojection_px,
-            confidence=self.confidence,
-            flags=cv2.SOLVEPNP_EPNP,
-        )
-        if not ok or inliers is None or len(inliers) < min_inliers:
-            return None
-        idx = np.asarray(inliers).ravel().astype(np.int64)
-        return np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), idx
-
-    def _refine(
-        self,
-        obj: npt.NDArray[np.float64],
-        img: npt.NDArray[np.float64],
-        hypothesis: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.int64]],
-        min_inliers: int,
-    ) -> PnpResult | None:
-        """Run LM on the inliers twice, re-selecting them with the refined pose in between."""
-        rvec, tvec, idx = hypothesis
-        for _ in range(2):
-            refined = cv2.solvePnPRefineLM(
-                obj[idx], img[idx], self.camera_matrix, self.dist, rvec, tvec
-            )
-            rvec, tvec = np.asarray(refined[0], np.float64), np.asarray(refined[1], np.float64)
-            err = _reprojection_errors(obj, img, rvec, tvec, self.camera_matrix, self.dist)
-            idx = np.flatnonzero(err < self.reprojection_px).astype(np.int64)
-            if len(idx) < min_inliers:
-                return None
-        rms = float(np.sqrt(np.mean(err[idx] ** 2)))
-        return PnpResult(to_matrix(rvec, tvec), idx, rms)
-
-
-def _reprojection_errors(
-    obj: npt.NDArray[np.float64],
-    img: npt.NDArray[np.float64],
-    rvec: npt.NDArray[np.float64],
-    tvec: npt.NDArray[np.float64],
-    camera_matrix: npt.NDArray[np.float64],
-    dist: npt.NDArray[np.float64] | None,
-) -> npt.NDArray[np.float64]:
-    proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
-    err = np.asarray(np.linalg.norm(np.asarray(proj).reshape(-1, 2) - img, axis=1), np.float64)
-    rot = np.asarray(cv2.Rodrigues(rvec)[0], np.float64)
-    behind = (obj @ rot.T + tvec.reshape(1, 3))[:, 2] <= 0
-    err[behind] = np.inf
-    return err
-
-
-def rigid_inverse(transform: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Return the inverse of a 4x4 rigid transform."""
-    out = np.eye(4)
-    rot = transform[:3, :3]
-    out[:3, :3] = rot.T
-    out[:3, 3] = -rot.T @ transform[:3, 3]
-    return out
-
-
-def to_matrix(
-    rvec: npt.NDArray[np.float64], tvec: npt.NDArray[np.float64]
-) -> npt.NDArray[np.float64]:
-    """Return the 4x4 transform of an OpenCV (rvec, tvec) pair."""
-    out = np.eye(4)
-    out[:3, :3] = np.asarray(cv2.Rodrigues(np.asarray(rvec, np.float64))[0], np.float64)
-    out[:3, 3] = np.asarray(tvec, np.float64).ravel()
-    return out
-
-
 def visible_share(
     points: npt.NDArray[np.float32], camera_from_points: npt.NDArray[np.float64], intr: Intrinsics
 ) -> float:
@@ -369,23 +160,3 @@ def visible_share(
     v = p[:, 1] / z * intr.fy + intr.cy
     inside = (p[:, 2] > 0) & (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
     return float(inside.mean())
-
-
-def information_from_points(points: npt.NDArray[np.float32]) -> npt.NDArray[np.float64]:
-    """Return the 6x6 information of a rigid alignment supported by these points (target frame).
-
-    The same sum of G^T G over correspondences as Open3D's
-    get_information_matrix_from_point_clouds, computed here from matched points instead of clouds.
-    """
-    p = np.asarray(points, np.float64)
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    zero, one = np.zeros_like(x), np.ones_like(x)
-    g = np.stack(
-        [
-            np.stack([zero, z, -y, one, zero, zero], axis=1),
-            np.stack([-z, zero, x, zero, one, zero], axis=1),
-            np.stack([y, -x, zero, zero, zero, one], axis=1),
-        ],
-        axis=1,
-    )  # (N, 3, 6)
-    return np.asarray(np.einsum("nri,nrj->ij", g, g), np.float64)

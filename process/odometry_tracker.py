@@ -11,19 +11,9 @@ import numpy.typing as npt
 from capture.recording import RgbdFrame
 from process.loop_closure import Edge, LoopCloser, PoseGraph
 from process.odometry_dense import DenseAligner, pose_difference
-from process.odometry_features import (
-    FeatureExtractor,
-    Keyframe,
-    PnpResult,
-    PnpSolver,
-    guided_match,
-    information_from_points,
-    match,
-    rigid_inverse,
-    thumbnail,
-    visible_share,
-)
-from process.odometry_refine import refine_with_depth
+from process.odometry_features import FeatureExtractor, Keyframe, thumbnail, visible_share
+from process.odometry_locate import Located, Locator
+from process.odometry_pnp import information_from_points, rigid_inverse
 
 if TYPE_CHECKING:
     from process.odometry_config import OdometryConfig
@@ -58,14 +48,6 @@ class _Image:
     descriptors: npt.NDArray[np.uint8]  # (N, 32)
 
 
-@dataclass(frozen=True, slots=True)
-class _Found:
-    keyframe: Keyframe
-    pnp: PnpResult
-    query: npt.NDArray[np.int64]  # matched current features
-    train: npt.NDArray[np.int64]  # their keyframe features
-
-
 class Tracker:
     """Track frames against keyframes and keep the pose graph; see process.odometry."""
 
@@ -83,13 +65,7 @@ class Tracker:
         self.dense = dense
         self.graph = graph
         self.keyframes = keyframes
-        self.pnp = PnpSolver(
-            extractor.camera_matrix,
-            extractor.dist,
-            cfg.ransac_reprojection_px,
-            cfg.ransac_iterations,
-            cfg.ransac_confidence,
-        )
+        self.locator = Locator(cfg, extractor=extractor)
         self._ref: Keyframe | None = None
         self._kf_from_camera = np.eye(4)
         self._last_world = np.eye(4)
@@ -99,7 +75,7 @@ class Tracker:
         self._lost = 0
         self._failure = ""
         self._segment = 0
-        self.loops = LoopCloser(cfg, pnp=self.pnp, graph=graph, keyframes=keyframes)
+        self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=graph, keyframes=keyframes)
 
     def step(
         self, gray: npt.NDArray[np.uint8], depth: npt.NDArray[np.float32], frame: RgbdFrame
@@ -124,68 +100,21 @@ class Tracker:
         return self._on_found(found, image)
 
     # -- tracking ------------------------------------------------------------------------------
-    def _track(self, kf: Keyframe, image: _Image) -> _Found | None:
+    def _track(self, kf: Keyframe, image: _Image) -> Located | None:
         """Return the pose of the image against a keyframe, or None (reason in self._failure)."""
-        prior = self._predict(kf)
-        q, t = self._match(kf, image, prior)
-        pnp = self.pnp.solve(
-            kf.points[t], image.xy[q], min_inliers=self.cfg.min_inliers, prior=prior
+        found = self.locator.locate(
+            kf, image.xy, image.descriptors, image.depth, prior=self._predict(kf)
         )
-        if pnp is not None and self.cfg.depth_refine:
-            pnp = self._with_depth(pnp, kf.points[t], image, q)
-        if pnp is None:
-            self._failure = (
-                f"{len(image.xy)} features, {len(q)} matches, < {self.cfg.min_inliers} PnP inliers"
-            )
+        if isinstance(found, str):
+            self._failure = found
             return None
         if not self._lost:
-            world = self.graph.poses[kf.id] @ pnp.reference_from_camera
+            world = self.graph.poses[kf.id] @ found.pnp.reference_from_camera
             step_m, _ = pose_difference(self._last_world, world)
             if step_m > self.cfg.max_step_m:
                 self._failure = f"a jump of {step_m:.2f} m (> max_step_m {self.cfg.max_step_m})"
                 return None
-        return _Found(kf, pnp, q, t)
-
-    def _with_depth(
-        self,
-        pnp: PnpResult,
-        points: npt.NDArray[np.float32],
-        image: _Image,
-        query: npt.NDArray[np.int64],
-    ) -> PnpResult:
-        """Refine a PnP pose with the current depth at the inlier keypoints (odometry_refine)."""
-        xy = image.xy[query[pnp.inliers]]
-        depth = self.extractor.lift(xy, image.depth)[:, 2]
-        if int(np.isfinite(depth).sum()) < self.cfg.min_inliers:
-            return pnp
-        pose, _ = refine_with_depth(
-            points[pnp.inliers],
-            self.extractor.normalised(xy),
-            depth,
-            camera_from_reference=pnp.camera_from_reference,
-            focal_px=self.extractor.intrinsics.fx,
-        )
-        return PnpResult(pose, pnp.inliers, pnp.rms_px)
-
-    def _match(
-        self, kf: Keyframe, image: _Image, prior: npt.NDArray[np.float64] | None
-    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-        """Match by projection around the predicted pose, else (or if too few) all against all."""
-        cfg = self.cfg
-        if prior is not None and cfg.guided_radius_px > 0:
-            q, t = guided_match(
-                kf.points,
-                kf.descriptors,
-                image.xy,
-                image.descriptors,
-                camera_from_points=prior,
-                intrinsics=self.extractor.intrinsics,
-                radius_px=cfg.guided_radius_px,
-                ratio=cfg.match_ratio,
-            )
-            if len(q) >= 2 * cfg.min_inliers:
-                return q, t
-        return match(image.descriptors, kf.descriptors, ratio=cfg.match_ratio)
+        return found
 
     def _predict(self, kf: Keyframe) -> npt.NDArray[np.float64] | None:
         """Return camera_from_keyframe if the camera keeps its last motion, or None when lost."""
@@ -194,7 +123,7 @@ class Tracker:
         world = self._last_world @ self._velocity
         return rigid_inverse(world) @ self.graph.poses[kf.id]
 
-    def _relocalise(self, image: _Image) -> _Found | None:
+    def _relocalise(self, image: _Image) -> Located | None:
         """Try the recent keyframes and the two that look most alike; keep the best."""
         failure, n = self._failure, self.cfg.relocalise_keyframes
         ids = [k.id for k in self.keyframes[-n - 1 :] if k is not self._ref][-n:] if n else []
@@ -202,7 +131,7 @@ class Tracker:
             thumb = thumbnail(image.gray)
             scores = np.array([float(k.thumbnail @ thumb) for k in self.keyframes])
             ids += [int(i) for i in np.argsort(-scores)[:2] if int(i) not in ids]
-        best: _Found | None = None
+        best: Located | None = None
         for i in ids:
             found = self._track(self.keyframes[i], image)
             if found is not None and (
@@ -212,7 +141,7 @@ class Tracker:
         self._failure = failure
         return best
 
-    def _on_found(self, found: _Found, image: _Image) -> TrackState:
+    def _on_found(self, found: Located, image: _Image) -> TrackState:
         kf, n_inliers = found.keyframe, len(found.pnp.inliers)
         kf_from_camera = found.pnp.reference_from_camera
         status, events = "ok", []
@@ -300,7 +229,7 @@ class Tracker:
         self._ref = kf
 
     def _make_keyframe(
-        self, found: _Found, kf_from_camera: npt.NDArray[np.float64], image: _Image
+        self, found: Located, kf_from_camera: npt.NDArray[np.float64], image: _Image
     ) -> str | None:
         """Make the image a keyframe; return None if it cannot be, else the loop event or ""."""
         parent = found.keyframe
@@ -391,7 +320,7 @@ class Tracker:
 
 
 def _match_arrays(
-    found: _Found, xy: npt.NDArray[np.float32]
+    found: Located, xy: npt.NDArray[np.float32]
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], npt.NDArray[np.float32]]:
     """Return (keypoints, inlier mask, matched keyframe keypoint per keypoint) for the timeline."""
     inliers = np.zeros(len(xy), bool)
