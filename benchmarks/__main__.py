@@ -17,7 +17,9 @@ from benchmarks.common import Row
 def main(selected: list[str]) -> int:
     """Run the `bench_*` modules (all, or those named) and print their rows."""
     rows: list[Row] = []
-    names = sorted(i.name for i in pkgutil.iter_modules(benchmarks.__path__) if i.name.startswith("bench_"))
+    names = sorted(
+        i.name for i in pkgutil.iter_modules(benchmarks.__path__) if i.name.startswith("bench_")
+    )
     for name in names:
         if selected and not any(s in name for s in selected):
             continue
@@ -29,7 +31,13 @@ def main(selected: list[str]) -> int:
         table.add_column(col)
     for r in rows:
         table.add_row(
-            r.area, escape(f"{r.metric} [{r.unit}]"), f"{r.ours:.4g}", f"{r.reference:.4g}", f"{r.ratio:.2f}x", r.goal, r.source
+            r.area,
+            escape(f"{r.metric} [{r.unit}]"),
+            f"{r.ours:.4g}",
+            f"{r.reference:.4g}",
+            f"{r.ratio:.2f}x",
+            r.goal,
+            r.source,
         )
     Console(width=200).print(table)
     return 0

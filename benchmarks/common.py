@@ -1,4 +1,4 @@
-"""What every benchmark returns: rows of one table, ours beside the reference, measured in one run."""
+"""What every benchmark returns: table rows, ours beside the reference, measured in one run."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ class Row:
     """One line of the `make bench` table.
 
     `ours` and `reference` are measured side by side in the same run where the reference is a
-    program (e.g. Open3D's odometry); where it is a published figure (the paper's), `source` says so.
+    program (e.g. Open3D's odometry); where it is a published figure (the paper's), `source`
+    says so.
     `higher_is_better` orients the ratio so that a ratio > 1 always means we are better.
     """
 

@@ -21,7 +21,9 @@ DEPTH_TO_COLOR = Extrinsics.from_librealsense([1, 0, 0, 0, 1, 0, 0, 0, 1], [0.01
 def shared_data() -> Path:
     """Return ../shared/data beside the checkout, or skip when it is absent."""
     if not SHARED_DATA.is_dir():
-        pytest.skip(f"real test data not found at {SHARED_DATA} (../shared/data beside the checkout)")
+        pytest.skip(
+            f"real test data not found at {SHARED_DATA} (../shared/data beside the checkout)"
+        )
     return SHARED_DATA
 
 
@@ -38,7 +40,10 @@ def write_synthetic_recording(path: Path, *, frames: int = 5, aligned: bool = Fa
             depth = np.full((480, 640), 2000, np.uint16)
             writer.write_color(color, stamp_ns=stamp_ns, intrinsics=COLOR_K)
             writer.write_depth(
-                depth, stamp_ns=stamp_ns, intrinsics=COLOR_K if aligned else DEPTH_K, aligned=aligned
+                depth,
+                stamp_ns=stamp_ns,
+                intrinsics=COLOR_K if aligned else DEPTH_K,
+                aligned=aligned,
             )
             pose = np.eye(4)
             pose[0, 3] = 0.01 * i
