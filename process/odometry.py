@@ -72,6 +72,7 @@ class Odometry:
             scale=cfg.dense_scale,
             max_depth_m=cfg.max_depth_m,
             iterations=cfg.dense_iterations,
+            quick_iterations=cfg.dense_frame_iterations,
             method=cfg.dense_method,
         )
         self.graph = PoseGraph()

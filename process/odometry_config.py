@@ -68,10 +68,11 @@ class OdometryConfig:
     keyframe_min_inliers: int = 50  # fewer inliers: a new keyframe
     keyframe_min_inlier_ratio: float = 0.5  # ... or fewer than this share of the keyframe's first
     dense_refine: bool = True  # refine keyframe poses by dense RGB-D alignment
-    dense_refine_all_frames: bool = False  # ... and every other frame too (slower)
+    dense_refine_all_frames: bool = True  # ... and every other frame, with the short schedule
     dense_method: str = "auto"  # "auto" | "point_to_plane" | "hybrid" | "intensity"
     dense_scale: int = 2  # dense alignment on images downsampled by this factor
-    dense_iterations: tuple[int, ...] = (10, 5, 3)  # per pyramid level, finest first
+    dense_iterations: tuple[int, ...] = (10, 5, 3)  # keyframes: per pyramid level, finest first
+    dense_frame_iterations: tuple[int, ...] = (3,)  # other frames: start from PnP, finest only
     dense_min_fitness: float = 0.3
     dense_max_correction_m: float = 0.05  # larger corrections of the PnP pose are rejected
     dense_max_correction_deg: float = 3.0
@@ -101,13 +102,14 @@ class OdometryConfig:
             self.dense_method,
         )
         _check(self.dense_scale in (1, 2, 4, 8), "dense_scale", "1, 2, 4 or 8", self.dense_scale)
-        _check(
-            0 < len(self.dense_iterations) <= 5
-            and all(0 < i <= 100 for i in self.dense_iterations),
-            "dense_iterations",
-            "1 to 5 pyramid levels of 1..100 iterations",
-            self.dense_iterations,
-        )
+        for name in ("dense_iterations", "dense_frame_iterations"):
+            levels = getattr(self, name)
+            _check(
+                0 < len(levels) <= 5 and all(0 < i <= 100 for i in levels),
+                name,
+                "1 to 5 pyramid levels of 1..100 iterations",
+                levels,
+            )
         for name in ("keyframe_min_inliers", "loop_min_inliers"):
             _check(
                 getattr(self, name) >= self.min_inliers, name, ">= min_inliers", getattr(self, name)

@@ -67,6 +67,7 @@ class DenseAligner:
         scale: int,
         max_depth_m: float,
         iterations: tuple[int, ...],
+        quick_iterations: tuple[int, ...] = (3,),
         method: str = "auto",
     ) -> None:
         self.method = method
@@ -80,9 +81,9 @@ class DenseAligner:
         self.k_small = k
         self.camera_matrix = o3d.core.Tensor.from_numpy(k)
         self.max_depth_m = max_depth_m
-        self.criteria = [
-            o3d.t.pipelines.odometry.OdometryConvergenceCriteria(n) for n in iterations
-        ]
+        criteria = o3d.t.pipelines.odometry.OdometryConvergenceCriteria
+        self.criteria = [criteria(n) for n in iterations]
+        self.quick_criteria = [criteria(n) for n in quick_iterations]
 
     def prepare(self, gray: npt.NDArray[np.uint8], depth_m: npt.NDArray[np.float32]) -> DenseImage:
         """Return the downsampled RGB-D image of a frame and its geometric conditioning."""
@@ -115,8 +116,12 @@ class DenseAligner:
         target: DenseImage,
         *,
         init_target_from_source: npt.NDArray[np.float64],
+        quick: bool = False,
     ) -> DenseResult | None:
-        """Return the refined target_from_source, or None where the alignment failed."""
+        """Return the refined target_from_source, or None where the alignment failed.
+
+        quick: the short schedule, for a start that is already close (a PnP pose).
+        """
         method = self.method
         if method == "auto":
             well_posed = min(source.conditioning, target.conditioning) >= _MIN_CONDITIONING
@@ -130,7 +135,7 @@ class DenseAligner:
                 o3d.core.Tensor.from_numpy(np.array(init_target_from_source, np.float64)),
                 1.0,
                 self.max_depth_m,
-                self.criteria,
+                self.quick_criteria if quick else self.criteria,
                 _METHODS[method],
             )
         except RuntimeError:

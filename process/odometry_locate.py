@@ -56,8 +56,28 @@ class Locator:
         if pnp is None:
             return f"{len(xy)} features, {len(q)} matches, < {self.cfg.min_inliers} PnP inliers"
         if self.cfg.depth_refine:
-            pnp = self._with_depth(pnp, kf.points[t], xy[q], depth)
+            pnp = self._with_depth(pnp, kf.points[t[pnp.inliers]], xy[q[pnp.inliers]], depth)
         return Located(kf, pnp, q, t)
+
+    def _with_depth(
+        self,
+        pnp: PnpResult,
+        points: npt.NDArray[np.float32],
+        xy: npt.NDArray[np.float32],
+        depth: npt.NDArray[np.float32],
+    ) -> PnpResult:
+        """Refine a PnP pose with the current depth at its inlier keypoints (odometry_refine)."""
+        z = self.extractor.lift(xy, depth)[:, 2]
+        if int(np.isfinite(z).sum()) < self.cfg.min_inliers:
+            return pnp
+        pose, _ = refine_with_depth(
+            points,
+            self.extractor.normalised(xy),
+            z,
+            camera_from_reference=pnp.camera_from_reference,
+            focal_px=self.extractor.intrinsics.fx,
+        )
+        return PnpResult(pose, pnp.inliers, pnp.rms_px)
 
     def _match(
         self,
@@ -82,24 +102,3 @@ class Locator:
             if len(q) >= 2 * cfg.min_inliers:
                 return q, t
         return match(descriptors, kf.descriptors, ratio=cfg.match_ratio)
-
-    def _with_depth(
-        self,
-        pnp: PnpResult,
-        points: npt.NDArray[np.float32],
-        xy: npt.NDArray[np.float32],
-        depth: npt.NDArray[np.float32],
-    ) -> PnpResult:
-        """Refine a PnP pose with the current depth at the inlier keypoints (odometry_refine)."""
-        inlier_xy = xy[pnp.inliers]
-        z = self.extractor.lift(inlier_xy, depth)[:, 2]
-        if int(np.isfinite(z).sum()) < self.cfg.min_inliers:
-            return pnp
-        pose, _ = refine_with_depth(
-            points[pnp.inliers],
-            self.extractor.normalised(inlier_xy),
-            z,
-            camera_from_reference=pnp.camera_from_reference,
-            focal_px=self.extractor.intrinsics.fx,
-        )
-        return PnpResult(pose, pnp.inliers, pnp.rms_px)

@@ -161,7 +161,7 @@ class Tracker:
                 events.append(made)
         elif self.cfg.dense_refine_all_frames and kf.dense is not None:
             current = self.dense.prepare(image.gray, image.depth)
-            kf_from_camera = self._refine(current, kf.dense, kf_from_camera)
+            kf_from_camera = self._refine(current, kf.dense, kf_from_camera, quick=True)
         ref = self._ref
         assert ref is not None  # set above
         self._kf_from_camera = kf_from_camera
@@ -247,11 +247,18 @@ class Tracker:
         return self.loops.close(kf)
 
     def _refine(
-        self, source: Any, target: Any, kf_from_camera: npt.NDArray[np.float64]
+        self,
+        source: Any,
+        target: Any,
+        kf_from_camera: npt.NDArray[np.float64],
+        *,
+        quick: bool = False,
     ) -> npt.NDArray[np.float64]:
         """Return the densely refined relative pose, or the given one where refinement fails."""
         cfg = self.cfg
-        result = self.dense.align(source, target, init_target_from_source=kf_from_camera)
+        result = self.dense.align(
+            source, target, init_target_from_source=kf_from_camera, quick=quick
+        )
         if result is None or result.fitness < cfg.dense_min_fitness:
             return kf_from_camera
         moved_m, turned_deg = pose_difference(kf_from_camera, result.target_from_source)

@@ -75,8 +75,8 @@ def test_inconsistent_loop_edge_is_pruned() -> None:
 def test_rendered_loop_is_closed() -> None:
     poses = loop_poses(40, radius_m=0.5, turns=1.15)
     frames = [to_frame(render(p, K_QVGA), index=i, intr=K_QVGA) for i, p in enumerate(poses)]
-    cfg = OdometryConfig(
-        min_inliers=15, keyframe_min_inliers=60, loop_min_gap=6, loop_min_inliers=60
+    cfg = OdometryConfig(  # 320x240 frames: the dense alignment at full size
+        min_inliers=15, keyframe_min_inliers=60, loop_min_gap=6, loop_min_inliers=60, dense_scale=1
     )
     odometry = Odometry(cfg, intrinsics=K_QVGA)
     results = track_all(odometry, frames)
