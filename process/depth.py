@@ -1,14 +1,18 @@
 """Depth in the colour camera: registration of raw depth, then the optional filters of the config.
 
-Registration follows librealsense's `rs2::align` (src/proc/align.cpp, `align_images`): each depth
-pixel's top-left and bottom-right corners are deprojected at its depth, moved into the colour
-camera and projected; the pixel then covers the colour rectangle between the two rounded corners,
-and where several depth pixels cover one colour pixel the nearer surface wins (a z-buffer). Unlike
-`rs2::align`, which writes the depth camera's z, we write z in the colour camera, the value that
-back-projects with the colour intrinsics to the right point (they differ by well under 1 mm on a
-D435, whose cameras are nearly parallel). Distortion is honoured with OpenCV's model of the
-coefficients (`plumb_bob` / `rational_polynomial`); the D435's depth camera has none and its
-colour camera near none, so the usual case takes the fast pinhole path.
+Registration follows librealsense's `rs2::align` as pyrealsense2 2.59 runs it (checked pixel by
+pixel against it on software-device frames): each depth pixel's top-left and bottom-right corners
+are deprojected at its depth, moved into the colour camera and projected, rounded as
+`static_cast<int>(p + 0.5f)`; the pixel then covers the colour rectangle between them, clipped to
+the image; where the depth camera has more pixels per degree than the colour camera, only the
+top-left corner's pixel. Where several depth pixels cover one colour pixel the nearer surface
+wins (a z-buffer) and, as in `rs2::align` and realsense-ros's aligned_depth_to_color, the value is
+the depth camera's z (z_frame="color" writes the colour camera's z instead; on a D435 the two
+differ by a few millimetres at the image border). The config's default z-buffer averages the
+samples of the nearest surface instead of taking the nearest sample, which with sensor noise is
+biased towards the camera. Holes stay holes: only depth pixels write. Distortion is honoured with
+OpenCV's model of the coefficients (`plumb_bob` / `rational_polynomial`); the D435's depth camera
+has none and its colour camera near none, so the usual case takes the fast pinhole path.
 """
 
 from __future__ import annotations

@@ -1,15 +1,18 @@
-"""Visual odometry: ORB + PnP RANSAC against the last keyframe, dense refinement, loop closure.
+"""Visual odometry: ORB + PnP against the last keyframe, dense refinement, loop closure.
 
 Per frame (`Odometry.track`): ORB features are matched to the reference keyframe's features that
-have depth, PnP RANSAC on the 3-D/2-D matches gives the pose, Levenberg-Marquardt refines it on
-the inliers. A frame becomes a keyframe when it has moved or turned enough, or sees too little of
-the reference; its pose relative to the reference is then refined densely (Open3D's RGB-D
-odometry on half-size images, see process.odometry_dense) and enters a pose graph. New keyframes
-are compared with old ones (thumbnail similarity and pose proximity, verified by PnP); a loop
-closure adds an edge and the graph is optimised. When tracking fails the odometry tries the recent
-keyframes and, after a while, starts a new segment; each of these is an event on the timeline.
-Every pose is stored relative to its keyframe, so `finish()` returns all frames after the last
-optimisation. Memory grows with keyframes (features, a thumbnail), plus one small pose per frame.
+have depth, by projection around the pose a constant-velocity model predicts (all against all
+when there is no prediction); PnP RANSAC, with the prediction as a second hypothesis, gives the
+pose; Gauss-Newton refines it on the inliers' reprojection and the current depth
+(process.odometry_locate). Open3D's RGB-D odometry on half-size images then refines it densely
+(process.odometry_dense). A frame becomes a keyframe when it has moved or turned enough, sees
+too little of the reference, or keeps too few inliers; it enters a pose graph. New keyframes are
+compared with old ones (thumbnail similarity and pose proximity, verified by PnP); a loop closure
+adds an edge and the graph is optimised (process.loop_closure). When tracking fails the
+odometry tries the recent keyframes and, after a while, starts a new segment; each of these is
+an event on the timeline. Every pose is stored relative to its keyframe, so `finish()` returns
+all frames after the last optimisation. Memory grows with keyframes (features, a thumbnail), plus
+one small pose per frame; only the reference keyframe keeps images.
 """
 
 from __future__ import annotations
