@@ -158,9 +158,11 @@ def normal_conditioning(
     k = camera_matrix.copy()
     if block > 1:
         h, w = depth_m.shape[0] // block, depth_m.shape[1] // block
-        blocks = depth_m[: h * block, : w * block].reshape(h, block, w, block)
-        complete = blocks.min(axis=(1, 3)) > 0
-        depth_m = np.where(complete, blocks.mean(axis=(1, 3)), 0.0).astype(np.float32)
+        cropped = np.ascontiguousarray(depth_m[: h * block, : w * block])
+        # Block means by area resampling (much faster than reducing a reshaped array).
+        mean = cv2.resize(cropped, (w, h), interpolation=cv2.INTER_AREA)
+        share = cv2.resize((cropped > 0).astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+        depth_m = np.where(share > 0.999, mean, 0.0).astype(np.float32)
         k[:2, :2] /= block
         k[:2, 2] = (k[:2, 2] + 0.5) / block - 0.5
     h, w = depth_m.shape
