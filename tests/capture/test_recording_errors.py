@@ -135,5 +135,8 @@ def test_the_writer_refuses_an_unknown_compression_and_an_unwritable_path(tmp_pa
         RecordingError, match=r"unknown compression 'gzip'; expected one of .*w\.mcap$"
     ):
         RecordingWriter(tmp_path / "w.mcap", compression="gzip")
-    with pytest.raises(RecordingError, match=r"cannot create recording: .*nodir/w.mcap$"):
-        RecordingWriter(tmp_path / "nodir" / "w.mcap")
+    (tmp_path / "a_file").write_text("not a folder")
+    with pytest.raises(RecordingError, match=r"cannot create recording: .*a_file/w.mcap$"):
+        RecordingWriter(tmp_path / "a_file" / "w.mcap")
+    RecordingWriter(tmp_path / "new" / "folder" / "w.mcap").finish()  # missing folders are made
+    assert (tmp_path / "new" / "folder" / "w.mcap").is_file()
