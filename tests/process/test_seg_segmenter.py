@@ -11,10 +11,10 @@ import pytest
 import torch
 from helpers_seg import fake_torchvision_state, random_checkpoint, write_random_checkpoint
 
-from capture.recording import VOC_TO_LABEL
+from capture.recording import VOC_TO_LABEL, RecordingReader
 from process.errors import ConfigError, ModelError, StageError
 from process.segmentation import Segmentation, SegmentationConfig, Segmenter
-from process.segmentation.metrics import confusion_matrix, iou_per_label
+from process.segmentation.metrics import confusion_matrix, iou_per_label, mean_iou
 from process.segmentation.weights import label_matrix, save_checkpoint
 
 VOC_CHAIR, VOC_BIRD, VOC_DOG = 9, 3, 12
@@ -167,6 +167,23 @@ def test_tflite_voc_model_segments_the_bird_photo(shared_data: Path, model: str)
     ious = iou_per_label(confusion_matrix(seg.labels, gt))
     assert ious[10] > 0.7  # the bird (VOC 3 -> clutter)
     assert set(np.unique(seg.labels)) <= {0, 10}
+
+
+def test_shipped_checkpoint_segments_an_unseen_simulated_room(sim_recording: Path) -> None:
+    # The sim_recording fixture is seed 3: not among the training (100-219) or validation rooms.
+    seg = Segmenter(SegmentationConfig())
+    conf = np.zeros((11, 11), np.int64)
+    with RecordingReader(sim_recording) as rec:
+        for frame in rec.frames():
+            if (
+                frame.index % 10 == 0
+                and frame.ground_truth
+                and frame.ground_truth.labels is not None
+            ):
+                conf += confusion_matrix(seg.segment(frame.color).labels, frame.ground_truth.labels)
+    assert conf.sum() == 3 * 640 * 480
+    assert mean_iou(conf) > 0.7
+    assert np.trace(conf) / conf.sum() > 0.9
 
 
 def test_importing_the_package_does_not_import_torch() -> None:
