@@ -22,14 +22,14 @@ from process.segmentation.dataset import (
     load_labelled,
 )
 from process.segmentation.deeplab import PRESETS, DeepLab, build_model
-from process.segmentation.metrics import IGNORE, confusion_matrix, iou_per_label, mean_iou
-from process.segmentation.weights import (
-    IMAGENET_MEAN,
-    IMAGENET_STD,
-    checkpoint_from_model,
-    init_from,
-    save_checkpoint,
+from process.segmentation.metrics import IGNORE, iou_per_label, mean_iou
+from process.segmentation.validation import (
+    evaluate,
+    normalise,
+    recalibrate_batchnorm,
+    set_bn_momentum,
 )
+from process.segmentation.weights import checkpoint_from_model, init_from, save_checkpoint
 
 logger = logging.getLogger(__name__)
 
@@ -125,7 +125,7 @@ def train(
         logger.info("initialised from %s; %d tensors left untrained", init, len(missing))
     if cfg.channels_last:
         model = model.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
-    _set_bn_momentum(model, cfg.bn_momentum)
+    set_bn_momentum(model, cfg.bn_momentum)
     steps_per_epoch = max(1, len(data) // cfg.batch_size)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(
@@ -141,7 +141,11 @@ def train(
         loss = _epoch(
             model, data, cfg, opt, sched, loss_fn, rng, gen, steps_per_epoch, epoch, progress
         )
-        recalibrate_batchnorm(model, data, cfg, rng, batches=cfg.bn_calibration_batches)
+        recalibrate_batchnorm(
+            model, data, batches=cfg.bn_calibration_batches, batch_size=cfg.batch_size, rng=rng,
+            channels_last=cfg.channels_last,
+        )  # fmt: skip
+        set_bn_momentum(model, cfg.bn_momentum)
         stats = EpochStats(epoch, loss, time.perf_counter() - t0)
         if val_data is not None:
             conf = evaluate(model, val_data, batch_size=cfg.batch_size)
@@ -215,67 +219,6 @@ def _batch(
     labels = torch.from_numpy(np.stack([p[1] for p in pairs])).long()
     memory = torch.channels_last if cfg.channels_last else torch.contiguous_format
     return normalise(images).contiguous(memory_format=memory), labels
-
-
-def recalibrate_batchnorm(
-    model: DeepLab,
-    data: LabelledImages,
-    cfg: TrainConfig,
-    rng: np.random.Generator,
-    *,
-    batches: int,
-) -> None:
-    """Replace BatchNorm running statistics by their average over unaugmented training frames.
-
-    Running averages lag behind weights that change quickly (early epochs, high learning
-    rate); the evaluated network then sees stale statistics. The weights are not changed.
-    """
-    if batches < 1:
-        return
-    _set_bn_momentum(model, None)  # None: cumulative average
-    for m in model.modules():
-        if isinstance(m, nn.BatchNorm2d):
-            m.reset_running_stats()
-    model.train()
-    memory = torch.channels_last if cfg.channels_last else torch.contiguous_format
-    with torch.no_grad():
-        for _ in range(batches):
-            idx = rng.choice(len(data), size=min(cfg.batch_size, len(data)), replace=False)
-            x = torch.from_numpy(data.colors[np.sort(idx)]).permute(0, 3, 1, 2).float() / 255.0
-            model(normalise(x).contiguous(memory_format=memory))
-    _set_bn_momentum(model, cfg.bn_momentum)
-
-
-def _set_bn_momentum(model: nn.Module, momentum: float | None) -> None:
-    for m in model.modules():
-        if isinstance(m, nn.BatchNorm2d):
-            m.momentum = momentum
-
-
-def normalise(images: torch.Tensor) -> torch.Tensor:
-    """Normalise a float batch in [0, 1] with the ImageNet mean and std our checkpoints store."""
-    mean = torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1)
-    std = torch.tensor(IMAGENET_STD).view(1, 3, 1, 1)
-    return (images - mean) / std
-
-
-def evaluate(model: DeepLab, data: LabelledImages, *, batch_size: int = 8) -> np.ndarray:
-    """Return the confusion matrix of the model's argmax on full (unaugmented) images."""
-    model.eval()
-    conf = np.zeros((model.arch.num_classes,) * 2, np.int64)
-    with torch.inference_mode():
-        for start in range(0, len(data), batch_size):
-            x = (
-                torch.from_numpy(data.colors[start : start + batch_size])
-                .permute(0, 3, 1, 2)
-                .float()
-                / 255.0
-            )
-            pred = model(normalise(x)).argmax(dim=1).numpy()
-            conf += confusion_matrix(
-                pred, data.labels[start : start + batch_size], num_labels=len(conf)
-            )
-    return conf
 
 
 def _save(

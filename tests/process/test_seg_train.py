@@ -18,13 +18,8 @@ from process.segmentation.dataset import (
 )
 from process.segmentation.deeplab import build_model
 from process.segmentation.metrics import IGNORE, confusion_matrix, iou_per_label, mean_iou
-from process.segmentation.train import (
-    EpochStats,
-    TrainConfig,
-    normalise,
-    recalibrate_batchnorm,
-    train,
-)
+from process.segmentation.train import EpochStats, TrainConfig, train
+from process.segmentation.validation import normalise, recalibrate_batchnorm
 from process.segmentation.weights import load_checkpoint
 
 TINY = TrainConfig(
@@ -111,12 +106,12 @@ def test_batchnorm_recalibration_sets_the_data_statistics() -> None:
     conv, stem_bn = stem[0], stem[1]
     assert isinstance(stem_bn, torch.nn.BatchNorm2d) and stem_bn.running_mean is not None
     stem_bn.running_mean.fill_(100.0)  # stale statistics
-    recalibrate_batchnorm(model, data, TINY, rng, batches=1)
+    recalibrate_batchnorm(model, data, batches=1, batch_size=TINY.batch_size, rng=rng)
     x = torch.from_numpy(data.colors).permute(0, 3, 1, 2).float() / 255.0
     with torch.no_grad():
         expected = conv(normalise(x)).mean(dim=(0, 2, 3))
     assert torch.allclose(stem_bn.running_mean, expected, atol=1e-4)
-    assert stem_bn.momentum == TINY.bn_momentum
+    assert stem_bn.momentum is None  # cumulative; train() restores its momentum
 
 
 def test_train_config_rejects_bad_values() -> None:
