@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 
 from process.errors import ModelError
 from process.segmentation.deeplab import (
@@ -129,6 +130,15 @@ def test_torchvision_layout_has_the_published_parameter_count() -> None:
     # torchvision: 11,029,328 parameters including the training-only aux FCN head
     # (conv 10x40x3x3, BN 2x10, conv 21x10 + 21 bias = 3,851), which we drop.
     assert parameter_count(build_model("deeplabv3_mobilenet_v3_large")) == 11_029_328 - 3_851
+
+
+@torch.no_grad()
+def test_torchvision_layout_has_the_published_compute() -> None:
+    # torchvision lists 10.45 "GFLOPS" (multiply-adds) for deeplabv3_mobilenet_v3_large at 520x520.
+    counter = FlopCounterMode(display=False)
+    with counter:
+        build_model("deeplabv3_mobilenet_v3_large").eval()(torch.zeros(1, 3, 520, 520))
+    assert counter.get_total_flops() / 2e9 == pytest.approx(10.45, rel=0.01)
 
 
 def test_arch_config_round_trips_and_rejects_bad_values() -> None:
