@@ -6,6 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import NUM_LABELS
+from process import evaluate
 
 IGNORE: int = 255  # label value excluded from training and evaluation
 
@@ -17,13 +18,7 @@ def confusion_matrix(
 
     Pixels whose ground truth is IGNORE or outside the label range are not counted.
     """
-    if pred.shape != gt.shape:
-        raise ValueError(f"prediction shape {pred.shape} differs from ground truth {gt.shape}")
-    g = gt.reshape(-1).astype(np.int64)
-    p = pred.reshape(-1).astype(np.int64)
-    keep = (g >= 0) & (g < num_labels) & (p >= 0) & (p < num_labels)
-    idx = g[keep] * num_labels + p[keep]
-    return np.bincount(idx, minlength=num_labels * num_labels).reshape(num_labels, num_labels)
+    return evaluate.confusion_matrix(pred, gt, n_labels=num_labels)
 
 
 def iou_per_label(confusion: npt.NDArray[np.int64]) -> dict[int, float]:
