@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEMO_DIR ?= demo_out
 DEMO_SEED ?= 7
-DEMO_FRAMES ?= 90
+DEMO_FRAMES ?= 300
 
 .PHONY: demo test lint bench sysdeps clean
 
