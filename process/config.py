@@ -20,6 +20,19 @@ STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
+class VizConfig:
+    """What goes into recording.rrd."""
+
+    # Colour and depth images of every n-th frame (keyframes always): an .rrd holds ~400 KiB per
+    # logged frame, ~7 GB for 10 minutes at 30 fps with n = 1. Poses and tracking: every frame.
+    images_every_n: int = 1
+
+    def __post_init__(self) -> None:
+        if self.images_every_n < 1:
+            raise ConfigError(f"viz.images_every_n must be >= 1, got {self.images_every_n}")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
 class ReplayConfig:
     """Every setting of `semreplay-process`, one section per stage."""
 
@@ -28,6 +41,7 @@ class ReplayConfig:
     segmentation: SegmentationConfig = dataclasses.field(default_factory=SegmentationConfig)
     fusion: FusionConfig = dataclasses.field(default_factory=FusionConfig)
     refine: RefineConfig = dataclasses.field(default_factory=RefineConfig)
+    viz: VizConfig = dataclasses.field(default_factory=VizConfig)
 
 
 def load_config(path: Path | None) -> ReplayConfig:

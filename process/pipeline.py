@@ -118,11 +118,8 @@ class ReplayPipeline:
                 odometry = Odometry(self.cfg.odometry, intrinsics=frame.color_intrinsics)
                 self.viz.log_calibration(frame.color_intrinsics)
             self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-            self.viz.log_frame(frame)
             with self._timer("depth"):
                 depth_m = depth.process(frame)
-            if not frame.aligned:
-                self.viz.log_registered_depth(depth_m)
             gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
             if self._anchor is None:
                 # The map's world is the recording's world where it has a first pose (so the map
@@ -131,7 +128,12 @@ class ReplayPipeline:
             with self._timer("odometry"):
                 track = odometry.track(frame, depth_m)
             world_from_camera = self._anchor @ track.world_from_camera
-            self._log_track(track, world_from_camera)
+            images = track.is_keyframe or frame.index % self.cfg.viz.images_every_n == 0
+            if images:
+                self.viz.log_frame(frame)
+                if not frame.aligned:
+                    self.viz.log_registered_depth(depth_m)
+            self._log_track(track, world_from_camera, keypoints=images)
             if gt_pose is not None:
                 gt_poses.append((frame.stamp_ns, gt_pose))
             if segmenter is not None and track.is_keyframe:
@@ -151,9 +153,12 @@ class ReplayPipeline:
         self._seconds[stage] = self._seconds.get(stage, 0.0) + dt
         self.viz.log_timing(stage, dt)
 
-    def _log_track(self, track: Any, world_from_camera: npt.NDArray[np.float64]) -> None:
+    def _log_track(
+        self, track: Any, world_from_camera: npt.NDArray[np.float64], *, keypoints: bool
+    ) -> None:
         self.viz.log_pose(world_from_camera, keyframe=track.is_keyframe)
-        self.viz.log_keypoints(track.keypoints_xy, inliers=track.inlier_mask)
+        if keypoints:  # only over the image they belong to
+            self.viz.log_keypoints(track.keypoints_xy, inliers=track.inlier_mask)
         self.viz.log_tracking(track.n_inliers, status=track.status, event=track.event)
 
     def _make_segmenter(self) -> Any:

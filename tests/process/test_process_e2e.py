@@ -227,3 +227,20 @@ def test_python_dash_m_is_the_same_program() -> None:
     )
     assert result.returncode == 0
     assert "run" in result.stdout and "refine" in result.stdout and "train" in result.stdout
+
+
+def test_images_every_n_thins_the_rrd_but_keeps_every_pose_and_keyframe(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    config = tmp_path / "thin.toml"
+    config.write_text("[viz]\nimages_every_n = 10\n")
+    out = tmp_path / "out"
+    args = ["run", str(sim_recording), "--out", str(out), "--stages", "odometry"]
+    result = runner.invoke(app, [*args, "--config", str(config)])
+    assert result.exit_code == 0, result.output
+    contents = read_rrd(out / outputs.RRD)
+    keyframes = json.loads((out / outputs.METRICS).read_text())["odometry"]["keyframes"]
+    rgb_rows = contents.rows[("/world/camera/image/rgb", "frame")]
+    assert 3 <= rgb_rows <= 3 + keyframes < 30  # frames 0, 10, 20 and the keyframes
+    assert contents.rows[("/world/camera/image/keypoints", "frame")] == rgb_rows
+    assert contents.rows[("/world/camera", "frame")] == 30
