@@ -11,7 +11,7 @@ import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Final, Literal, Protocol, runtime_checkable
+from typing import Final, Literal, Self
 
 import numpy as np
 import numpy.typing as npt
@@ -52,9 +52,23 @@ def _path_of(kind: str, kinds: Mapping[str, str], what: str) -> str:
     return kinds[kind]
 
 
-@runtime_checkable
-class Logger(Protocol):
-    """What the pipeline logs; `RerunLogger` and `NullLogger` both satisfy it."""
+class NullLogger:
+    """What the pipeline logs, one method per domain object; this twin does nothing (--no-viz).
+
+    `RerunLogger` overrides every method to write an `.rrd` (kiss-icp's StubVisualizer pattern):
+    a method added here without an override logs nothing rather than failing.
+    """
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
 
     def set_frame(self, index: int, *, stamp_ns: int) -> None:
         """Set the `frame` and `capture_time` timelines for what follows."""
@@ -139,104 +153,10 @@ class Logger(Protocol):
         """Flush and finish the output."""
 
 
-class NullLogger:
-    """A `Logger` that does nothing, for `--no-viz`."""
-
-    def __enter__(self) -> NullLogger:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        return None
-
-    def set_frame(self, index: int, *, stamp_ns: int) -> None:
-        """Do nothing."""
-
-    def set_stage(self, step: int) -> None:
-        """Do nothing."""
-
-    def log_calibration(self, color_intrinsics: Intrinsics) -> None:
-        """Do nothing."""
-
-    def log_frame(self, frame: RgbdFrame) -> None:
-        """Do nothing."""
-
-    def log_registered_depth(self, depth_m: FloatArray) -> None:
-        """Do nothing."""
-
-    def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
-        """Do nothing."""
-
-    def log_keypoints(
-        self,
-        xy: FloatArray,
-        *,
-        inliers: npt.NDArray[np.bool_],
-        matched_xy: FloatArray | None = None,
-    ) -> None:
-        """Do nothing."""
-
-    def log_tracking(self, n_inliers: int, *, status: str, event: str | None = None) -> None:
-        """Do nothing."""
-
-    def log_trajectory(
-        self, kind: TrajectoryKind, stamps_ns: IntArray, positions: FloatArray
-    ) -> None:
-        """Do nothing."""
-
-    def log_segmentation(self, labels: IntArray, *, confidence: FloatArray | None = None) -> None:
-        """Do nothing."""
-
-    def log_timing(self, stage: str, seconds: float) -> None:
-        """Do nothing."""
-
-    def log_text(self, message: str, *, level: str = "INFO") -> None:
-        """Do nothing."""
-
-    def log_map(
-        self,
-        kind: MapKind,
-        points: FloatArray,
-        *,
-        colors: npt.NDArray[np.uint8] | None = None,
-        labels: IntArray | None = None,
-    ) -> None:
-        """Do nothing."""
-
-    def log_refine(
-        self,
-        kind: RefineKind,
-        points: FloatArray,
-        *,
-        labels: IntArray | None = None,
-        clusters: IntArray | None = None,
-    ) -> None:
-        """Do nothing."""
-
-    def log_dbscan_curves(
-        self,
-        label_name: str,
-        *,
-        ks: IntArray,
-        eps_m: FloatArray,
-        min_pts: FloatArray,
-        n_clusters: IntArray,
-        chosen_k: int,
-    ) -> None:
-        """Do nothing."""
-
-    def log_metrics(self, section: str, values: Mapping[str, float]) -> None:
-        """Do nothing."""
-
-    def close(self) -> None:
-        """Do nothing."""
+Logger = NullLogger  # the type the pipeline holds: a RerunLogger or its do-nothing twin
 
 
-class RerunLogger:
+class RerunLogger(NullLogger):
     """A `Logger` that writes an `.rrd` file with the blueprint of `viz.layout`."""
 
     def __init__(
@@ -264,17 +184,6 @@ class RerunLogger:
         self._styled: set[str] = set()
         self._frame_of_stamp: dict[int, int] = {}  # 16 bytes a frame: kept for log_trajectory
         self._closed = False
-
-    def __enter__(self) -> RerunLogger:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def set_frame(self, index: int, *, stamp_ns: int) -> None:
         """Set the `frame` and `capture_time` timelines for what follows."""

@@ -292,7 +292,7 @@ def test_empty_inputs_of_a_lost_frame_are_logged_and_verify(tmp_path: Path) -> N
 
 
 def test_close_is_idempotent_and_both_loggers_are_loggers(tmp_path: Path) -> None:
-    log: Logger = RerunLogger(tmp_path / "c.rrd", recording_name="c")  # mypy checks the protocol
+    log: Logger = RerunLogger(tmp_path / "c.rrd", recording_name="c")  # a RerunLogger is a Logger
     assert isinstance(log, Logger)
     log.close()
     log.close()
