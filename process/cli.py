@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import signal
-import sys
 from pathlib import Path
 from typing import Annotated, NoReturn
 
@@ -31,6 +30,11 @@ Examples:
 def _fail(message: str) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(1)
+
+
+def _interrupt(signum: int, frame: object) -> NoReturn:
+    """Treat SIGTERM as Ctrl-C, so that a killed run cleans up the same way."""
+    raise KeyboardInterrupt
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -99,14 +103,17 @@ def _run(
     pipeline = ReplayPipeline(
         recording, out_dir=out, cfg=cfg, stages=stage_list, viz=viz, weights=weights, device=device
     )
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(130))
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         result = pipeline.run()
-    except KeyboardInterrupt:
+    except BaseException as err:
+        # Every output but the .rrd is written whole or not at all; drop the .rrd's temporary.
         viz.close()
         outputs.temporary_path(rrd).unlink(missing_ok=True)
-        done = ", ".join(p.name for p in pipeline.result.written) or "nothing"
-        _fail(f"interrupted; complete files written: {done}; no partial file was left in {out}")
+        if isinstance(err, KeyboardInterrupt):
+            done = ", ".join(p.name for p in pipeline.result.written) or "nothing"
+            _fail(f"interrupted; complete files written: {done}; no partial file was left in {out}")
+        raise
     viz.close()
     if not no_viz:
         outputs.temporary_path(rrd).replace(rrd)

@@ -16,6 +16,7 @@ from capture.recording import RecordingReader, RecordingWriter
 from process import outputs
 from process.cli import app
 from process.cloud import read_cloud
+from process.errors import StageError
 from process.pipeline import ReplayPipeline
 from process.trajectory import read_tum
 
@@ -244,3 +245,17 @@ def test_images_every_n_thins_the_rrd_but_keeps_every_pose_and_keyframe(
     assert 3 <= rgb_rows <= 3 + keyframes < 30  # frames 0, 10, 20 and the keyframes
     assert contents.rows[("/world/camera/image/keypoints", "frame")] == rgb_rows
     assert contents.rows[("/world/camera", "frame")] == 30
+
+
+def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(
+    sim_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def fail(*_: object) -> None:
+        raise StageError("segmentation failed on purpose")
+
+    monkeypatch.setattr(ReplayPipeline, "_keyframe", fail)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines()[-1] == "error: segmentation failed on purpose"
+    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
