@@ -66,6 +66,8 @@ class ReplayPipeline:
         self.result = RunResult(out_dir)
         self._seconds: dict[str, float] = {}
         self._anchor: npt.NDArray[np.float64] | None = None  # map world from the first camera
+        self._keyframe_stamps: set[int] = set()
+        self._segmenter: Any = None
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -78,10 +80,11 @@ class ReplayPipeline:
                 )
                 logger.info("no ground truth in %s: metrics against it are skipped", self.recording)
             trajectory, gt_poses = self._replay_frames(rec)
+            self._finish_odometry(trajectory, gt_poses)
+            if "fusion" in self.stages:
+                cloud = self._fuse(rec, trajectory)
             gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
-        self._finish_odometry(trajectory, gt_poses)
         if "fusion" in self.stages:
-            cloud = self._fusion.cloud()
             self._write_cloud(outputs.MAP_FUSED, cloud)
             self.viz.set_stage(0)
             self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
@@ -100,10 +103,7 @@ class ReplayPipeline:
         depth = DepthProcessor(self.cfg.depth)
         odometry: Odometry | None = None
         segmenter = self._make_segmenter() if "segmentation" in self.stages else None
-        if "fusion" in self.stages:
-            from process.fusion import Fusion
-
-            self._fusion = Fusion(self.cfg.fusion)
+        self._segmenter = segmenter
         gt_poses: list[tuple[int, Any]] = []
         self._seg_stats = _SegStats()
         frames = tqdm(
@@ -137,7 +137,7 @@ class ReplayPipeline:
             if gt_pose is not None:
                 gt_poses.append((frame.stamp_ns, gt_pose))
             if segmenter is not None and track.is_keyframe:
-                self._keyframe(frame, depth_m, world_from_camera, segmenter)
+                self._keyframe(frame, segmenter)
         self._frames = frames.n
         self._odometry = odometry
         trajectory = odometry.finish() if odometry is not None else []
@@ -166,13 +166,7 @@ class ReplayPipeline:
 
         return Segmenter(self.cfg.segmentation, weights=self.weights, device=self.device)
 
-    def _keyframe(
-        self,
-        frame: RgbdFrame,
-        depth_m: npt.NDArray[np.float32],
-        world_from_camera: Any,
-        segmenter: Any,
-    ) -> None:
+    def _keyframe(self, frame: RgbdFrame, segmenter: Any) -> None:
         with self._timer("segmentation"):
             seg = segmenter.segment(frame.color)
         self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
@@ -180,16 +174,34 @@ class ReplayPipeline:
         if gt is not None and gt.labels is not None:
             self._seg_stats.add(seg.labels, gt.labels)
         self._seg_stats.keyframes += 1
-        if "fusion" in self.stages:
-            with self._timer("fusion"):
-                self._fusion.integrate(
+        self._keyframe_stamps.add(frame.stamp_ns)
+
+    def _fuse(self, rec: RecordingReader, trajectory: list[tuple[int, Any]]) -> Any:
+        """Fuse the keyframes at their final poses: a second pass over the recording.
+
+        The final poses include the loop closures found after a keyframe was tracked; keeping
+        the keyframes' images until then would make memory grow with the recording, reading
+        them again does not. Segmenting a keyframe again costs ~20 ms.
+        """
+        from process.fusion import Fusion
+
+        fusion = Fusion(self.cfg.fusion)
+        depth = DepthProcessor(self.cfg.depth)
+        world_from_camera = dict(trajectory)
+        with self._timer("fusion"):
+            for frame in rec.frames():
+                if frame.stamp_ns not in self._keyframe_stamps:
+                    continue
+                seg = self._segmenter.segment(frame.color)
+                fusion.integrate(
                     frame.color,
-                    depth_m,
+                    depth.process(frame),
                     seg.labels,
                     seg.confidence,
                     intrinsics=frame.color_intrinsics,
-                    world_from_camera=world_from_camera,
+                    world_from_camera=world_from_camera[frame.stamp_ns],
                 )
+        return fusion.cloud()
 
     # -- after the frames ----------------------------------------------------------------
     def _finish_odometry(

@@ -17,6 +17,7 @@ from process import outputs
 from process.cli import app
 from process.cloud import read_cloud
 from process.errors import StageError
+from process.odometry import Odometry
 from process.pipeline import ReplayPipeline
 from process.trajectory import read_tum
 
@@ -259,3 +260,31 @@ def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1] == "error: segmentation failed on purpose"
     assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+
+
+def test_fusion_places_keyframes_at_their_final_poses(
+    run_twice: dict[str, Any], sim_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Loop closure moves poses after their keyframes were tracked: the map must use the final
+    # trajectory. Shift it by 10 m and the whole fused map moves by 10 m.
+    finish = Odometry.finish
+
+    def shifted(self: Odometry) -> list[tuple[int, Any]]:
+        out = []
+        for stamp, pose in finish(self):
+            moved = pose.copy()
+            moved[0, 3] += 10.0
+            out.append((stamp, moved))
+        return out
+
+    monkeypatch.setattr(Odometry, "finish", shifted)
+    out = tmp_path / "out"
+    args = ["run", str(sim_recording), "--out", str(out), "--stages", "fusion", "--no-viz"]
+    assert runner.invoke(app, args).exit_code == 0
+    with RecordingReader(sim_recording) as rec:
+        first = next(rec.frames()).ground_truth
+    assert first is not None and first.world_from_camera is not None
+    expected = first.world_from_camera[:3, :3] @ np.array([10.0, 0.0, 0.0])
+    normal = read_cloud(run_twice["out"] / outputs.MAP_FUSED).points.mean(axis=0)
+    moved = read_cloud(out / outputs.MAP_FUSED).points.mean(axis=0)
+    assert np.allclose(moved - normal, expected, atol=0.05)
