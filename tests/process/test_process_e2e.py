@@ -288,3 +288,26 @@ def test_fusion_places_keyframes_at_their_final_poses(
     normal = read_cloud(run_twice["out"] / outputs.MAP_FUSED).points.mean(axis=0)
     moved = read_cloud(out / outputs.MAP_FUSED).points.mean(axis=0)
     assert np.allclose(moved - normal, expected, atol=0.05)
+
+
+def test_sigterm_is_handled_like_ctrl_c(sim_recording: Path, tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    child = subprocess.Popen(
+        [sys.executable, "-m", "process", "run", str(sim_recording), "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while not (out / outputs.CONFIG).exists() and time.monotonic() < deadline:
+        time.sleep(0.02)  # config.toml is written first: the run has started
+    child.send_signal(signal.SIGTERM)
+    _, err = child.communicate(timeout=60)
+    assert child.returncode == 1, err
+    assert "error: interrupted; complete files written: config.toml" in err
+    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
