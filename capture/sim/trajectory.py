@@ -2,9 +2,10 @@
 
 The camera is held at eye height and looks inwards across the room, at the furniture, with a slow
 sway of yaw and pitch, a walking bob and a small handheld shake (sums of sinusoids, so the motion
-is smooth at 30 fps). Long recordings walk the whole loop at constant speed; short ones walk out
-along the loop and come back on a parallel lane, so every recording revisits its start (for loop
-closure) at a walking speed a person would use.
+is smooth at 30 fps). Long recordings walk whole laps of the loop at constant speed, as many as
+fit at the walking speed (a 10-minute recording circles a 15 m loop about 20 times, as a person
+scanning a room would); short ones walk out along the loop and come back on a parallel lane, so
+every recording revisits its start (for loop closure) at a walking speed a person would use.
 """
 
 from __future__ import annotations
@@ -112,7 +113,8 @@ def _walk(
     direction = float(rng.choice([-1.0, 1.0]))
     phase = 2 * np.pi * t_s / duration_s
     if max_speed_m_s * duration_s >= perimeter:
-        s, lane = perimeter * t_s / duration_s, np.zeros_like(t_s)
+        laps = int(max_speed_m_s * duration_s // perimeter)
+        s, lane = laps * perimeter * t_s / duration_s, np.zeros_like(t_s)
     else:  # out along the loop on an inner lane, back on an outer one
         reach = max_speed_m_s * duration_s / 2
         lane_m = min(0.15, 0.04 * duration_s)  # sideways at most ~0.25 m/s

@@ -28,6 +28,20 @@ def test_the_walk_returns_to_its_start_at_walking_speed(frames: int) -> None:
     assert loop_start > 0.1  # it went somewhere
 
 
+def test_a_long_recording_walks_whole_laps_at_walking_speed() -> None:
+    scene = build_scene(1)
+    traj = handheld_loop(scene, frames=3 * 60 * 30, fps=30.0, seed=1)  # three minutes
+    xy = traj.world_from_camera[:, :2, 3]
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    path_m = float(step.sum())
+    assert 0.35 * 180 < path_m <= 0.5 * 180 + 1.0  # whole laps at 0.35-0.5 m/s, not one slow lap
+    centre = np.asarray(scene.path.center_m)
+    angle = np.unwrap(np.arctan2(xy[:, 1] - centre[1], xy[:, 0] - centre[0]))
+    laps = abs(angle[-1] - angle[0]) / (2 * np.pi)
+    assert laps > 3 and abs(laps - round(laps)) < 0.02  # several laps, ending where it began
+    assert np.linalg.norm(xy[-1] - xy[0]) < 0.05
+
+
 def test_the_camera_stays_in_the_room_at_eye_height_looking_level() -> None:
     scene = build_scene(2)
     traj = handheld_loop(scene, frames=300, fps=30.0, seed=2)
