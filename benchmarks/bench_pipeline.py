@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+import psutil
 
 from benchmarks.common import Row
 from capture.sim import simulate_recording
@@ -89,12 +92,65 @@ def run() -> list[Row]:
 
 def _peak_rss_gb(recording: Path, out: Path, *args: str) -> tuple[float, float]:
     """Run the job in a fresh child process; return its peak RSS in GB and its wall time."""
+    peak, seconds, _ = run_sampled(recording, out, *args)
+    return peak, seconds
+
+
+def run_sampled(
+    recording: Path, out: Path, *args: str, every_s: float = 0.5
+) -> tuple[float, float, list[tuple[float, float]]]:
+    """Run `process run` in a child; return its peak RSS (GB), wall time and (s, GB) samples.
+
+    The peak is the kernel's (wait4: this child's own high-water mark, transient allocations
+    included); the samples show how the resident set moves during the run.
+    """
     command = [sys.executable, "-m", "process", "run", str(recording), "--out", str(out), *args]
     t0 = time.perf_counter()
     child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, usage = os.wait4(child.pid, 0)  # this child's own peak, not the largest so far
+    samples: list[tuple[float, float]] = []
+    watched = psutil.Process(child.pid)
+    while True:  # wait4, not poll(): it reaps the child with its own peak RSS
+        pid, status, usage = os.wait4(child.pid, os.WNOHANG)
+        if pid:
+            break
+        with contextlib.suppress(psutil.Error):
+            samples.append((time.perf_counter() - t0, watched.memory_info().rss / 1024**3))
+        time.sleep(every_s)
     seconds = time.perf_counter() - t0
     child.returncode = os.waitstatus_to_exitcode(status)
     if child.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} exited with {child.returncode}")
-    return usage.ru_maxrss / 1024**2, seconds
+    return usage.ru_maxrss / 1024**2, seconds, samples
+
+
+def ten_minutes(recording: Path | None, out: Path) -> int:
+    """Measure a whole 10-minute simulated recording (~20 min to simulate, ~20 min to process).
+
+    Not part of `make bench` (it takes an hour on 2 cores and ~24 GB of disk); run it as
+    `python -m benchmarks.bench_pipeline ten-minutes [REC.mcap] --out DIR`. It writes
+    DIR/rss.csv (seconds, GB) and prints the peak and the resident set at each tenth of the run.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    if recording is None:
+        recording = out / "sim_10min.mcap"
+        if not recording.exists():
+            t0 = time.perf_counter()
+            simulate_recording(recording, seed=7, frames=TEN_MINUTES)
+            print(f"simulated {TEN_MINUTES} frames in {time.perf_counter() - t0:.0f} s")
+    peak, seconds, samples = run_sampled(recording, out / "run", every_s=2.0)
+    with (out / "rss.csv").open("w") as f:
+        f.write("seconds,rss_gb\n")
+        f.writelines(f"{t:.1f},{gb:.4f}\n" for t, gb in samples)
+    print(f"{recording}: process run took {seconds:.0f} s; peak RSS {peak:.2f} GB (goal < 4)")
+    for k in range(1, 11):
+        t_k, gb_k = samples[min(len(samples) - 1, k * len(samples) // 10 - 1)]
+        print(f"  {10 * k:3d} % of the run ({t_k:5.0f} s): {gb_k:.2f} GB resident")
+    return 0 if peak < GOAL_RSS_GB else 1
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 4 or sys.argv[1] != "ten-minutes" or "--out" not in sys.argv:
+        sys.exit("usage: python -m benchmarks.bench_pipeline ten-minutes [REC.mcap] --out DIR")
+    where = sys.argv.index("--out")
+    given = [a for i, a in enumerate(sys.argv[2:], 2) if i not in (where, where + 1)]
+    sys.exit(ten_minutes(Path(given[0]) if given else None, Path(sys.argv[where + 1])))

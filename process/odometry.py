@@ -1,18 +1,19 @@
 """Visual odometry: ORB + PnP against the last keyframe, dense refinement, loop closure.
 
 Per frame (`Odometry.track`): ORB features are matched to the reference keyframe's features that
-have depth, by projection around the pose a constant-velocity model predicts (all against all
-when there is no prediction); PnP RANSAC, with the prediction as a second hypothesis, gives the
-pose; Gauss-Newton refines it on the inliers' reprojection and the current depth
+have depth, by projection around the pose a constant-velocity model predicts (all against all when
+there is no prediction); PnP RANSAC, with the prediction as a second hypothesis, gives the pose;
+Gauss-Newton refines it on the inliers' reprojection and the current depth
 (process.odometry_locate). Open3D's RGB-D odometry on half-size images then refines it densely
-(process.odometry_dense). A frame becomes a keyframe when it has moved or turned enough, sees
-too little of the reference, or keeps too few inliers; it enters a pose graph. New keyframes are
+(process.odometry_dense). A frame becomes a keyframe when it has moved or turned enough, sees too
+little of the reference, or keeps too few inliers; it enters a pose graph. New keyframes are
 compared with old ones (thumbnail similarity and pose proximity, verified by PnP); a loop closure
-adds an edge and the graph is optimised (process.loop_closure). When tracking fails the
-odometry tries the recent keyframes and, after a while, starts a new segment; each of these is
-an event on the timeline. Every pose is stored relative to its keyframe, so `finish()` returns
-all frames after the last optimisation. Memory grows with keyframes (features, a thumbnail), plus
-one small pose per frame; only the reference keyframe keeps images.
+adds an edge and the graph is optimised (GTSAM, sparse: process.loop_closure). When tracking fails
+the odometry tries the recent keyframes and, after a while, starts a new segment; each of these is
+an event on the timeline. Every pose is stored relative to its keyframe, so `finish()` returns all
+frames after the last optimisation. Memory grows with keyframes (features, a thumbnail: <= 80 kB
+each, ~2,400 keyframes in a 10-minute walk), plus one small pose per frame; only the reference
+keyframe keeps images.
 """
 
 from __future__ import annotations

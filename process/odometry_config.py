@@ -85,7 +85,7 @@ class OdometryConfig:
     loop_search_radius_m: float = 1.0  # pose-proximity candidates
     loop_min_inliers: int = 100  # PnP inliers that verify a loop (the best candidate is kept)
     loop_cooldown: int = 3  # keyframes after a loop closure before the next is searched
-    loop_max_correspondence_m: float = 0.05  # Open3D line-process scale
+    loop_max_correspondence_m: float = 0.05  # line-process scale (Open3D's meaning)
     loop_prune_threshold: float = 0.25
 
     def __post_init__(self) -> None:
