@@ -72,6 +72,41 @@ def test_inconsistent_loop_edge_is_pruned() -> None:
     )
 
 
+def test_many_laps_keep_the_true_loops_and_prune_the_false_ones() -> None:
+    """Five laps of 120 keyframes, a loop edge every 4th keyframe, every 10th of them 50 cm off."""
+    per_lap, n = 120, 600
+    truth = _circle(per_lap) * (n // per_lap)
+    bias = np.eye(4)
+    bias[:3, :3] = Rotation.from_euler("y", 0.1, degrees=True).as_matrix()
+    graph = PoseGraph()
+    pose = truth[0].copy()
+    graph.add_node(pose)
+    info = np.eye(6) * 300.0
+    for i in range(1, n):
+        step = np.linalg.inv(truth[i - 1]) @ truth[i] @ bias
+        pose = pose @ step
+        graph.add_node(pose)
+        graph.add_edge(Edge(i, i - 1, step, info, False))
+    false = set()
+    for k, i in enumerate(range(per_lap, n, 4)):
+        measured = np.linalg.inv(truth[i - per_lap]) @ truth[i]
+        if k % 10 == 5:
+            measured[:3, 3] += [0.5, 0.0, 0.0]
+            false.add(i)
+        graph.add_edge(Edge(i, i - per_lap, measured, info, True))
+    drifted = max(
+        np.linalg.norm(p[:3, 3] - t[:3, 3]) for p, t in zip(graph.poses, truth, strict=True)
+    )
+    _, kept = graph.optimise(max_correspondence_m=0.05, prune_threshold=0.25)
+    after = max(
+        np.linalg.norm(p[:3, 3] - t[:3, 3]) for p, t in zip(graph.poses, truth, strict=True)
+    )
+    loops = {e.source for e in graph.edges if e.uncertain}
+    assert loops.isdisjoint(false)
+    assert kept == len(range(per_lap, n, 4)) - len(false)
+    assert drifted > 0.5 and after < 0.02
+
+
 def test_rendered_loop_is_closed() -> None:
     poses = loop_poses(40, radius_m=0.5, turns=1.15)
     frames = [to_frame(render(p, K_QVGA), index=i, intr=K_QVGA) for i, p in enumerate(poses)]
