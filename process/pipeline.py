@@ -26,7 +26,7 @@ from process.depth import DepthProcessor
 from process.evaluate import class_counts, confusion_matrix, ratios
 from process.odometry import Odometry
 from process.trajectory import ate_rmse, path_length, rpe, write_tum
-from viz.rerun_log import Logger
+from viz.logger import Logger
 
 logger = logging.getLogger(__name__)
 

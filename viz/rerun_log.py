@@ -1,8 +1,7 @@
-"""A logger with one method per domain object, writing an `.rrd` with our blueprint; and its twin.
+"""A `Logger` that writes an `.rrd` with our blueprint, one method per domain object.
 
-The pipeline holds a `Logger`: a `RerunLogger` normally, a `NullLogger` for `--no-viz`. Methods
-take numpy arrays, plain values or capture types, never `process` objects, and hand arrays to
-Rerun without Python loops.
+`RerunLogger` hands arrays to Rerun without Python loops; `make_logger` picks it or its
+do-nothing twin `NullLogger` (viz.logger).
 """
 
 from __future__ import annotations
@@ -10,150 +9,38 @@ from __future__ import annotations
 import uuid
 from collections.abc import Mapping
 from pathlib import Path
-from types import TracebackType
-from typing import Final, Literal, Self
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 import rerun as rr
 
-from capture.recording import LABEL_COLORS, LABEL_NAMES, Intrinsics, RgbdFrame
-from viz import layout
+from capture.recording import Intrinsics, RgbdFrame
+from viz import layout, rerun_arrays
+from viz.logger import (
+    FloatArray,
+    IntArray,
+    Logger,
+    MapKind,
+    NullLogger,
+    RefineKind,
+    TrajectoryKind,
+)
 
-TrajectoryKind = Literal["estimated", "ground_truth"]
-MapKind = Literal["fused", "refined"]
-RefineKind = Literal["planes", "outliers", "clusters", "regrown"]
-FloatArray = npt.NDArray[np.floating]
-IntArray = npt.NDArray[np.integer]
+__all__ = [
+    "FloatArray",
+    "IntArray",
+    "Logger",
+    "MapKind",
+    "NullLogger",
+    "RefineKind",
+    "RerunLogger",
+    "TrajectoryKind",
+    "make_logger",
+]
 
-_MM_PER_M: Final = 1000.0
 _POINT_RADIUS: Final = rr.Radius.ui_points(1.5)
 _PALETTE: Final = layout.cluster_palette()
-
-
-def _depth_mm(depth_m: FloatArray) -> npt.NDArray[np.uint16]:
-    """Return depth in whole millimetres (half the bytes of float32 in the .rrd)."""
-    mm: npt.NDArray[np.uint16] = np.clip(depth_m * _MM_PER_M + 0.5, 0.0, 65535.0).astype(np.uint16)
-    return mm
-
-
-def _points(points: FloatArray, name: str) -> npt.NDArray[np.float32]:
-    """Return (N, 3) float32 points, or raise ValueError naming the argument."""
-    arr = np.asarray(points, dtype=np.float32)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"expected {name} of shape (N, 3), found {arr.shape}; pass xyz rows")
-    return arr
-
-
-def _path_of(kind: str, kinds: Mapping[str, str], what: str) -> str:
-    """Return the entity path of a kind, or raise ValueError listing the valid kinds."""
-    if kind not in kinds:
-        raise ValueError(f"expected a {what} kind in {sorted(kinds)}, found {kind!r}")
-    return kinds[kind]
-
-
-class NullLogger:
-    """What the pipeline logs, one method per domain object; this twin does nothing (--no-viz).
-
-    `RerunLogger` overrides every method to write an `.rrd` (kiss-icp's StubVisualizer pattern):
-    a method added here without an override logs nothing rather than failing.
-    """
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-    def set_frame(self, index: int, *, stamp_ns: int) -> None:
-        """Set the `frame` and `capture_time` timelines for what follows."""
-
-    def set_stage(self, step: int) -> None:
-        """Set the `stage` timeline (layout.STAGE_*) for what follows."""
-
-    def log_calibration(self, color_intrinsics: Intrinsics) -> None:
-        """Log the colour camera's pinhole, once, static."""
-
-    def log_frame(self, frame: RgbdFrame) -> None:
-        """Log a frame's colour (JPEG) and raw depth."""
-
-    def log_registered_depth(self, depth_m: FloatArray) -> None:
-        """Log depth registered to the colour camera, in metres."""
-
-    def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
-        """Log the camera pose of the current frame and mark keyframes."""
-
-    def log_keypoints(
-        self,
-        xy: FloatArray,
-        *,
-        inliers: npt.NDArray[np.bool_],
-        matched_xy: FloatArray | None = None,
-    ) -> None:
-        """Log keypoints in colour pixels, inliers green; optionally their matched pixels."""
-
-    def log_tracking(self, n_inliers: int, *, status: str, event: str | None = None) -> None:
-        """Log the tracking inlier count, the status when it changes, and an event."""
-
-    def log_trajectory(
-        self, kind: TrajectoryKind, stamps_ns: IntArray, positions: FloatArray
-    ) -> None:
-        """Log a whole trajectory (estimated or ground truth)."""
-
-    def log_segmentation(self, labels: IntArray, *, confidence: FloatArray | None = None) -> None:
-        """Log a label image (RECORDING.md ids) and its per-pixel confidence in [0, 1]."""
-
-    def log_timing(self, stage: str, seconds: float) -> None:
-        """Log the time a stage took, in seconds."""
-
-    def log_text(self, message: str, *, level: str = "INFO") -> None:
-        """Log a line of text at a level (TRACE, DEBUG, INFO, WARN, ERROR, CRITICAL)."""
-
-    def log_map(
-        self,
-        kind: MapKind,
-        points: FloatArray,
-        *,
-        colors: npt.NDArray[np.uint8] | None = None,
-        labels: IntArray | None = None,
-    ) -> None:
-        """Log a labelled point map (fused or refined)."""
-
-    def log_refine(
-        self,
-        kind: RefineKind,
-        points: FloatArray,
-        *,
-        labels: IntArray | None = None,
-        clusters: IntArray | None = None,
-    ) -> None:
-        """Log the points of one refinement step, coloured by cluster where given."""
-
-    def log_dbscan_curves(
-        self,
-        label_name: str,
-        *,
-        ks: IntArray,
-        eps_m: FloatArray,
-        min_pts: FloatArray,
-        n_clusters: IntArray,
-        chosen_k: int,
-    ) -> None:
-        """Log the adaptive-DBSCAN curves over K of one class and mark the chosen K."""
-
-    def log_metrics(self, section: str, values: Mapping[str, float]) -> None:
-        """Log named scalar metrics of one section."""
-
-    def close(self) -> None:
-        """Flush and finish the output."""
-
-
-Logger = NullLogger  # the type the pipeline holds: a RerunLogger or its do-nothing twin
 
 
 class RerunLogger(NullLogger):
@@ -219,11 +106,11 @@ class RerunLogger(NullLogger):
             self.log_calibration(frame.color_intrinsics)
         rgb = rr.Image(frame.color, color_model="RGB").compress(jpeg_quality=self._jpeg_quality)
         self._rec.log(layout.RGB, rgb)
-        self._rec.log(layout.DEPTH, rr.DepthImage(_depth_mm(frame.depth_m), meter=_MM_PER_M))
+        self._rec.log(layout.DEPTH, rerun_arrays.depth_image(frame.depth_m))
 
     def log_registered_depth(self, depth_m: FloatArray) -> None:
         """Log depth registered to the colour camera, in metres (drawn as a cloud in 3-D)."""
-        self._rec.log(layout.DEPTH_REGISTERED, rr.DepthImage(_depth_mm(depth_m), meter=_MM_PER_M))
+        self._rec.log(layout.DEPTH_REGISTERED, rerun_arrays.depth_image(depth_m))
 
     def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
         """Log the camera pose of the current frame and mark keyframes on the trail."""
@@ -268,8 +155,8 @@ class RerunLogger(NullLogger):
         self, kind: TrajectoryKind, stamps_ns: IntArray, positions: FloatArray
     ) -> None:
         """Log a whole trajectory: a static line and, per stamp, a marker of where it is."""
-        path = _path_of(kind, layout.TRAJECTORY_KINDS, "trajectory")
-        xyz = _points(positions, "positions")
+        path = rerun_arrays.path_of(kind, layout.TRAJECTORY_KINDS, "trajectory")
+        xyz = rerun_arrays.points(positions, "positions")
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         if stamps.shape != (len(xyz),):
             raise ValueError(
@@ -311,8 +198,8 @@ class RerunLogger(NullLogger):
         labels: IntArray | None = None,
     ) -> None:
         """Log a map in label colours, RGB ones at `<map>/rgb`; a refined map replaces the fused."""
-        path = _path_of(kind, layout.MAP_KINDS, "map")
-        xyz = _points(points, "points")
+        path = rerun_arrays.path_of(kind, layout.MAP_KINDS, "map")
+        xyz = rerun_arrays.points(points, "points")
         if kind == "refined":  # the same places, relabelled: hide the fused map from now on
             self._rec.log(layout.MAP_FUSED, rr.Clear(recursive=True))
         if labels is None:
@@ -332,8 +219,8 @@ class RerunLogger(NullLogger):
         clusters: IntArray | None = None,
     ) -> None:
         """Log the points of one refinement step, coloured by cluster (0 = none, grey) if given."""
-        path = _path_of(kind, layout.REFINE_KINDS, "refine")
-        xyz = _points(points, "points")
+        path = rerun_arrays.path_of(kind, layout.REFINE_KINDS, "refine")
+        xyz = rerun_arrays.points(points, "points")
         colors = None if clusters is None else _PALETTE[np.asarray(clusters) % len(_PALETTE)]
         self._rec.log(path, rr.Points3D(xyz, class_ids=labels, colors=colors, radii=_POINT_RADIUS))
 
@@ -348,16 +235,9 @@ class RerunLogger(NullLogger):
         chosen_k: int,
     ) -> None:
         """Log eps, MinPts and cluster count over K (timeline `dbscan_k`) and mark the chosen K."""
-        k = np.asarray(ks, dtype=np.int64)
         curves = {"eps_m": eps_m, "min_pts": min_pts, "n_clusters": n_clusters}
-        values = {name: np.asarray(v, dtype=np.float64) for name, v in curves.items()}
-        if any(v.shape != k.shape for v in values.values()) or k.ndim != 1:
-            shapes = {name: v.shape for name, v in values.items()}
-            raise ValueError(f"expected curves of the shape of ks {k.shape}, found {shapes}")
-        chosen = np.flatnonzero(k == chosen_k)
-        if len(chosen) == 0:
-            raise ValueError(f"expected chosen_k among ks {k.min()}..{k.max()}, found {chosen_k}")
-        color = self._label_color(label_name)
+        k, values, chosen = rerun_arrays.curves_over_k(ks, curves, chosen_k=chosen_k)
+        color = rerun_arrays.label_color(label_name)
         for name, v in values.items():
             path = layout.dbscan_path(name, label_name)
             self._style(path, rr.SeriesLines(names=label_name, colors=color))
@@ -396,13 +276,6 @@ class RerunLogger(NullLogger):
         """Send a whole curve as scalars over the `dbscan_k` timeline in one call."""
         index = rr.TimeColumn(layout.TIMELINE_DBSCAN_K, sequence=ks)
         self._rec.send_columns(path, indexes=[index], columns=rr.Scalars.columns(scalars=values))
-
-    @staticmethod
-    def _label_color(label_name: str) -> tuple[int, int, int] | None:
-        """Return the colour of a label by name, None for an unknown name."""
-        if label_name in LABEL_NAMES:
-            return LABEL_COLORS[LABEL_NAMES.index(label_name)]
-        return None
 
 
 def make_logger(rrd_path: Path | None, *, recording_name: str) -> RerunLogger | NullLogger:

@@ -1,0 +1,126 @@
+"""What the pipeline logs, one method per domain object: the `Logger` type and its do-nothing twin.
+
+The pipeline holds a `Logger`: a `viz.rerun_log.RerunLogger` normally, a `NullLogger` for
+`--no-viz`. Methods take numpy arrays, plain values or capture types, never `process` objects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import TracebackType
+from typing import Literal, Self
+
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Intrinsics, RgbdFrame
+
+TrajectoryKind = Literal["estimated", "ground_truth"]
+MapKind = Literal["fused", "refined"]
+RefineKind = Literal["planes", "outliers", "clusters", "regrown"]
+FloatArray = npt.NDArray[np.floating]
+IntArray = npt.NDArray[np.integer]
+
+
+class NullLogger:
+    """What the pipeline logs, one method per domain object; this twin does nothing (--no-viz).
+
+    `RerunLogger` overrides every method to write an `.rrd` (kiss-icp's StubVisualizer pattern):
+    a method added here without an override logs nothing rather than failing.
+    """
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def set_frame(self, index: int, *, stamp_ns: int) -> None:
+        """Set the `frame` and `capture_time` timelines for what follows."""
+
+    def set_stage(self, step: int) -> None:
+        """Set the `stage` timeline (layout.STAGE_*) for what follows."""
+
+    def log_calibration(self, color_intrinsics: Intrinsics) -> None:
+        """Log the colour camera's pinhole, once, static."""
+
+    def log_frame(self, frame: RgbdFrame) -> None:
+        """Log a frame's colour (JPEG) and raw depth."""
+
+    def log_registered_depth(self, depth_m: FloatArray) -> None:
+        """Log depth registered to the colour camera, in metres."""
+
+    def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
+        """Log the camera pose of the current frame and mark keyframes."""
+
+    def log_keypoints(
+        self,
+        xy: FloatArray,
+        *,
+        inliers: npt.NDArray[np.bool_],
+        matched_xy: FloatArray | None = None,
+    ) -> None:
+        """Log keypoints in colour pixels, inliers green; optionally their matched pixels."""
+
+    def log_tracking(self, n_inliers: int, *, status: str, event: str | None = None) -> None:
+        """Log the tracking inlier count, the status when it changes, and an event."""
+
+    def log_trajectory(
+        self, kind: TrajectoryKind, stamps_ns: IntArray, positions: FloatArray
+    ) -> None:
+        """Log a whole trajectory (estimated or ground truth)."""
+
+    def log_segmentation(self, labels: IntArray, *, confidence: FloatArray | None = None) -> None:
+        """Log a label image (RECORDING.md ids) and its per-pixel confidence in [0, 1]."""
+
+    def log_timing(self, stage: str, seconds: float) -> None:
+        """Log the time a stage took, in seconds."""
+
+    def log_text(self, message: str, *, level: str = "INFO") -> None:
+        """Log a line of text at a level (TRACE, DEBUG, INFO, WARN, ERROR, CRITICAL)."""
+
+    def log_map(
+        self,
+        kind: MapKind,
+        points: FloatArray,
+        *,
+        colors: npt.NDArray[np.uint8] | None = None,
+        labels: IntArray | None = None,
+    ) -> None:
+        """Log a labelled point map (fused or refined)."""
+
+    def log_refine(
+        self,
+        kind: RefineKind,
+        points: FloatArray,
+        *,
+        labels: IntArray | None = None,
+        clusters: IntArray | None = None,
+    ) -> None:
+        """Log the points of one refinement step, coloured by cluster where given."""
+
+    def log_dbscan_curves(
+        self,
+        label_name: str,
+        *,
+        ks: IntArray,
+        eps_m: FloatArray,
+        min_pts: FloatArray,
+        n_clusters: IntArray,
+        chosen_k: int,
+    ) -> None:
+        """Log the adaptive-DBSCAN curves over K of one class and mark the chosen K."""
+
+    def log_metrics(self, section: str, values: Mapping[str, float]) -> None:
+        """Log named scalar metrics of one section."""
+
+    def close(self) -> None:
+        """Flush and finish the output."""
+
+
+Logger = NullLogger  # the type the pipeline holds: a RerunLogger or its do-nothing twin
