@@ -30,7 +30,8 @@ from process.loop_closure import PoseGraph
 from process.odometry_config import OdometryConfig
 from process.odometry_dense import DenseAligner
 from process.odometry_features import FeatureExtractor, Keyframe
-from process.odometry_tracker import Tracker, TrackState
+from process.odometry_state import TrackState
+from process.odometry_tracker import Tracker
 
 __all__ = ["Odometry", "OdometryConfig", "TrackResult"]
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -11,30 +11,18 @@ import numpy.typing as npt
 from capture.recording import RgbdFrame
 from process.loop_closure import Edge, LoopCloser, PoseGraph
 from process.odometry_dense import DenseAligner, pose_difference
-from process.odometry_features import FeatureExtractor, Keyframe, thumbnail, visible_share
+from process.odometry_features import FeatureExtractor, Keyframe, thumbnail
+from process.odometry_keyframes import needs_keyframe, refine_densely
 from process.odometry_locate import Located, Locator
 from process.odometry_pnp import information_from_points, rigid_inverse
+from process.odometry_state import TrackState, match_arrays
 
 if TYPE_CHECKING:
     from process.odometry_config import OdometryConfig
 
+__all__ = ["TrackState", "Tracker"]
+
 _WEAK_INFORMATION = 1e-3  # ties a new segment to the old one without constraining it
-
-
-@dataclass(frozen=True, slots=True)
-class TrackState:
-    """The tracker's verdict on one frame (the Odometry turns it into a TrackResult)."""
-
-    keyframe_id: int  # -1 before initialisation
-    keyframe_from_camera: npt.NDArray[np.float64]  # (4, 4)
-    is_keyframe: bool
-    status: str
-    n_inliers: int
-    keypoints_xy: npt.NDArray[np.float32]  # (N, 2)
-    inlier_mask: npt.NDArray[np.bool_]  # (N,)
-    matched_keyframe_xy: npt.NDArray[np.float32]  # (N, 2), NaN where unmatched
-    event: str | None = None
-    trajectory_corrected: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,7 +138,9 @@ class Tracker:
             after = f" after {self._lost} lost frame(s)" if self._lost else ""
             events.append(f"relocalised frame {image.frame.index} against keyframe {kf.id}{after}")
         self._lost = 0
-        is_keyframe = kf is not self._ref or self._needs_keyframe(kf, kf_from_camera, n_inliers)
+        is_keyframe = kf is not self._ref or needs_keyframe(
+            kf, kf_from_camera, n_inliers, cfg=self.cfg, intrinsics=self.extractor.intrinsics
+        )
         self._set_reference(kf)
         corrected = False
         if is_keyframe:
@@ -160,8 +150,7 @@ class Tracker:
                 kf_from_camera, corrected = np.eye(4), bool(made)
                 events.append(made)
         elif self.cfg.dense_refine_all_frames and kf.dense is not None:
-            current = self.dense.prepare(image.gray, image.depth)
-            kf_from_camera = self._refine(current, kf.dense, kf_from_camera, quick=True)
+            kf_from_camera = self._refine_frame(kf, kf_from_camera, image)
         ref = self._ref
         assert ref is not None  # set above
         self._kf_from_camera = kf_from_camera
@@ -175,26 +164,19 @@ class Tracker:
             is_keyframe,
             status,
             n_inliers,
-            *_match_arrays(found, image.xy),
+            *match_arrays(found, image.xy),
             event,
             corrected,
         )
 
-    def _needs_keyframe(
-        self, kf: Keyframe, kf_from_camera: npt.NDArray[np.float64], n_inliers: int
-    ) -> bool:
-        cfg = self.cfg
-        moved_m, turned_deg = pose_difference(np.eye(4), kf_from_camera)
-        if moved_m > cfg.keyframe_translation_m or turned_deg > cfg.keyframe_rotation_deg:
-            return True
-        if kf.first_inliers == 0:
-            kf.first_inliers = n_inliers
-        if n_inliers < max(
-            cfg.keyframe_min_inliers, cfg.keyframe_min_inlier_ratio * kf.first_inliers
-        ):
-            return True
-        share = visible_share(kf.points, rigid_inverse(kf_from_camera), self.extractor.intrinsics)
-        return share < cfg.keyframe_min_overlap
+    def _refine_frame(
+        self, kf: Keyframe, kf_from_camera: npt.NDArray[np.float64], image: _Image
+    ) -> npt.NDArray[np.float64]:
+        """Return a non-keyframe's pose against kf, refined densely with the short schedule."""
+        current = self.dense.prepare(image.gray, image.depth)
+        return refine_densely(
+            self.dense, current, kf.dense, kf_from_camera, cfg=self.cfg, quick=True
+        )
 
     # -- keyframes -----------------------------------------------------------------------------
     def _new_keyframe(
@@ -235,7 +217,9 @@ class Tracker:
         parent = found.keyframe
         dense = self.dense.prepare(image.gray, image.depth) if self.cfg.dense_refine else None
         if dense is not None and parent.dense is not None:
-            kf_from_camera = self._refine(dense, parent.dense, kf_from_camera)
+            kf_from_camera = refine_densely(
+                self.dense, dense, parent.dense, kf_from_camera, cfg=self.cfg
+            )
         kf = self._new_keyframe(
             image, world_from_keyframe=self.graph.poses[parent.id] @ kf_from_camera
         )
@@ -245,26 +229,6 @@ class Tracker:
         support = information_from_points(parent.points[found.train[found.pnp.inliers]])
         self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, support, False))
         return self.loops.close(kf)
-
-    def _refine(
-        self,
-        source: Any,
-        target: Any,
-        kf_from_camera: npt.NDArray[np.float64],
-        *,
-        quick: bool = False,
-    ) -> npt.NDArray[np.float64]:
-        """Return the densely refined relative pose, or the given one where refinement fails."""
-        cfg = self.cfg
-        result = self.dense.align(
-            source, target, init_target_from_source=kf_from_camera, quick=quick
-        )
-        if result is None or result.fitness < cfg.dense_min_fitness:
-            return kf_from_camera
-        moved_m, turned_deg = pose_difference(kf_from_camera, result.target_from_source)
-        if moved_m > cfg.dense_max_correction_m or turned_deg > cfg.dense_max_correction_deg:
-            return kf_from_camera
-        return result.target_from_source
 
     def _initialise(self, image: _Image) -> TrackState:
         kf = self._new_keyframe(image, world_from_keyframe=np.eye(4))
@@ -324,14 +288,3 @@ class Tracker:
         nan = np.full((len(xy), 2), np.nan, np.float32)
         mask = np.zeros(len(xy), bool)
         return TrackState(ref, self._kf_from_camera.copy(), False, status, 0, xy, mask, nan, event)
-
-
-def _match_arrays(
-    found: Located, xy: npt.NDArray[np.float32]
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], npt.NDArray[np.float32]]:
-    """Return (keypoints, inlier mask, matched keyframe keypoint per keypoint) for the timeline."""
-    inliers = np.zeros(len(xy), bool)
-    inliers[found.query[found.pnp.inliers]] = True
-    matched = np.full((len(xy), 2), np.nan, np.float32)
-    matched[found.query] = found.keyframe.xy[found.train]
-    return xy, inliers, matched
