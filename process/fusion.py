@@ -12,6 +12,7 @@ import numpy.typing as npt
 from capture.recording import NUM_LABELS, Intrinsics
 from process.cloud import LabelledCloud
 from process.errors import ConfigError, StageError
+from process.fusion_tsdf import TsdfSurface
 
 logger = logging.getLogger(__name__)
 
@@ -28,6 +29,13 @@ class FusionConfig:
     max_depth_m: float = 4.0  # beyond this D435 depth noise exceeds a few centimetres
     min_confidence: float = 0.3  # pixels less sure than this add geometry but no label vote
     pixel_stride: int = 2  # use every n-th pixel in each direction
+    # "tsdf": the map's points are the zero crossing of a TSDF (thin surfaces), labelled by the
+    # votes; "voxels": one point per voxel any depth sample hit (as thick as the depth noise)
+    surface: str = "tsdf"
+    # TSDF truncation in voxels: 5 cm, about the D435's depth RMS at 3.5 m (2.5 / 3 / 4 / 6 gave
+    # phase I F1 0.92 / 0.91 / 0.90 / 0.87 on a simulated 900-frame loop; 0.84 with "voxels")
+    truncation_voxels: float = 2.5
+    min_views: int = 3  # TSDF surface points need this many keyframes to have seen them
 
     def __post_init__(self) -> None:
         if not 0.001 <= self.voxel_size_m <= 1.0:
@@ -41,6 +49,14 @@ class FusionConfig:
             raise ConfigError(f"fusion.min_confidence must be in 0..1, got {self.min_confidence}")
         if not 1 <= self.pixel_stride <= 64:
             raise ConfigError(f"fusion.pixel_stride must be in 1..64, got {self.pixel_stride}")
+        if self.surface not in ("tsdf", "voxels"):
+            raise ConfigError(f'fusion.surface must be "tsdf" or "voxels", got "{self.surface}"')
+        if not 1.0 <= self.truncation_voxels <= 64.0:
+            raise ConfigError(
+                f"fusion.truncation_voxels must be in 1..64, got {self.truncation_voxels}"
+            )
+        if not 1 <= self.min_views <= 1_000_000:
+            raise ConfigError(f"fusion.min_views must be >= 1, got {self.min_views}")
 
 
 @lru_cache(maxsize=8)
@@ -86,6 +102,16 @@ class Fusion:
         self._sum_rgb = np.zeros((0, 3), np.float64)
         self._count = np.zeros(0, np.float64)
         self._votes = np.zeros((0, NUM_LABELS), np.float32)
+        self._tsdf = (
+            TsdfSurface(
+                voxel_size_m=cfg.voxel_size_m,
+                truncation_voxels=cfg.truncation_voxels,
+                min_depth_m=cfg.min_depth_m,
+                max_depth_m=cfg.max_depth_m,
+            )
+            if cfg.surface == "tsdf"
+            else None
+        )
         self.frames = 0
 
     def __len__(self) -> int:
@@ -132,6 +158,10 @@ class Fusion:
         weight = np.nan_to_num(confidence.reshape(-1)[flat].astype(np.float32))
         weight = np.where(weight >= self.cfg.min_confidence, weight, np.float32(0.0))
         self._accumulate(world, color.reshape(-1, 3)[flat], labels.reshape(-1)[flat], weight)
+        if self._tsdf is not None:
+            self._tsdf.integrate(
+                depth_m, intrinsics=intrinsics, world_from_camera=world_from_camera
+            )
         self.frames += 1
 
     def _accumulate(
@@ -189,12 +219,42 @@ class Fusion:
         self._votes = np.concatenate([self._votes, np.zeros((extra, NUM_LABELS), np.float32)])
 
     def cloud(self) -> LabelledCloud:
-        """Return the map: one point per voxel at its mean position, mean colour, winning label."""
+        """Return the map: points with the mean colour and winning label of their voxel.
+
+        With the TSDF surface the points are its zero crossing, each labelled by the vote voxel
+        it lies in (or the nearest one within two voxels; points with none are dropped); else
+        one point per voxel at the mean of its samples. A voxel nobody voted for confidently
+        (all weights 0) stays unlabelled.
+        """
         n = self._size
         count = self._count[:n, None]
-        points = (self._sum_xyz[:n] / count).astype(np.float32)
+        centroids = (self._sum_xyz[:n] / count).astype(np.float32)
         colors = np.clip(self._sum_rgb[:n] / count + 0.5, 0, 255).astype(np.uint8)
         votes = self._votes[:n]
-        # a voxel nobody voted for confidently (all weights 0) stays unlabelled
-        labels = np.where(votes.max(axis=1) > 0, votes.argmax(axis=1), 0)
-        return LabelledCloud(points, colors, labels.astype(np.uint8))
+        labels = np.where(votes.max(axis=1) > 0, votes.argmax(axis=1), 0).astype(np.uint8)
+        if self._tsdf is None:
+            return LabelledCloud(centroids, colors, labels)
+        points = self._tsdf.points(min_views=self.cfg.min_views)
+        slots = self._slots_of(points, centroids)
+        keep = slots >= 0
+        return LabelledCloud(points[keep], colors[slots[keep]], labels[slots[keep]])
+
+    def _slots_of(
+        self, points: npt.NDArray[np.float32], centroids: npt.NDArray[np.float32]
+    ) -> npt.NDArray[np.int64]:
+        """Return each point's vote row: its voxel's, else the nearest within 2 voxels, else -1."""
+        slots = np.full(len(points), -1, np.int64)
+        if len(points) == 0 or self._size == 0:
+            return slots
+        keys = voxel_keys(points.astype(np.float64), self.cfg.voxel_size_m)
+        where = np.minimum(np.searchsorted(self._keys, keys), len(self._keys) - 1)
+        found = self._keys[where] == keys
+        slots[found] = self._slot_of_key[where[found]]
+        if not found.all():
+            from scipy.spatial import cKDTree
+
+            distance, nearest = cKDTree(centroids).query(
+                points[~found], distance_upper_bound=2 * self.cfg.voxel_size_m
+            )
+            slots[~found] = np.where(np.isfinite(distance), nearest, -1)
+        return slots

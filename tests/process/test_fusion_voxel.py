@@ -1,4 +1,4 @@
-"""Fusion: two posed views of a plane land on the plane with the confidence-voted label."""
+"""Fusion: posed views of a plane land on the plane with the confidence-voted label."""
 
 from __future__ import annotations
 
@@ -43,7 +43,9 @@ def test_two_views_of_a_plane_land_on_it_with_the_voted_label() -> None:
     second = np.eye(4)
     second[:3, :3] = _rotation_y(1.0)
     second[:3, 3] = (0.08, 0.02, 0.2)
-    fusion = Fusion(FusionConfig(voxel_size_m=0.02, pixel_stride=1, max_depth_m=5.0))
+    fusion = Fusion(
+        FusionConfig(voxel_size_m=0.02, pixel_stride=1, max_depth_m=5.0, surface="voxels")
+    )
     fusion.integrate(*_images(4, 0.9, _view_of_plane(first)), intrinsics=K, world_from_camera=first)
     fusion.integrate(
         *_images(5, 0.6, _view_of_plane(second)), intrinsics=K, world_from_camera=second
@@ -62,7 +64,7 @@ def test_two_views_of_a_plane_land_on_it_with_the_voted_label() -> None:
 def test_votes_add_up_over_views() -> None:
     pose = np.eye(4)
     depth = _view_of_plane(pose)
-    fusion = Fusion(FusionConfig(pixel_stride=2))
+    fusion = Fusion(FusionConfig(pixel_stride=2, surface="voxels"))
     fusion.integrate(*_images(4, 0.9, depth), intrinsics=K, world_from_camera=pose)
     for _ in range(2):  # two weaker votes for 7 beat one strong vote for 4
         fusion.integrate(*_images(7, 0.5, depth), intrinsics=K, world_from_camera=pose)
@@ -75,11 +77,51 @@ def test_unsure_pixels_add_geometry_but_no_vote_and_far_depth_is_dropped() -> No
     pose = np.eye(4)
     depth = _view_of_plane(pose)
     depth[:, :10] = 9.0  # beyond max_depth_m
-    fusion = Fusion(FusionConfig(min_confidence=0.5, max_depth_m=4.0))
+    fusion = Fusion(FusionConfig(min_confidence=0.5, max_depth_m=4.0, surface="voxels"))
     fusion.integrate(*_images(4, 0.2, depth), intrinsics=K, world_from_camera=pose)
     cloud = fusion.cloud()
     assert len(cloud) > 0 and (cloud.labels == 0).all()
     assert cloud.points[:, 2].max() < 4.0
+
+
+def _noisy_views(fusion: Fusion, n: int, *, sigma_m: float) -> None:
+    """Integrate n views of the plane from poses 1 cm apart, depth with Gaussian noise."""
+    rng = np.random.default_rng(3)
+    for i in range(n):
+        pose = np.eye(4)
+        pose[:3, 3] = (0.01 * (i % 5) - 0.02, 0.01 * (i // 5) - 0.02, 0.0)
+        depth = _view_of_plane(pose) + rng.normal(0.0, sigma_m, (K.height, K.width))
+        images = _images(4, 0.9, depth.astype(np.float32))
+        fusion.integrate(*images, intrinsics=K, world_from_camera=pose)
+
+
+def test_tsdf_surface_of_a_noisy_plane_is_thin_where_voxels_are_thick() -> None:
+    tsdf = Fusion(FusionConfig(pixel_stride=1, surface="tsdf"))
+    voxels = Fusion(FusionConfig(pixel_stride=1, surface="voxels"))
+    for fusion in (tsdf, voxels):
+        _noisy_views(fusion, 25, sigma_m=0.02)  # the D435's RMS at ~2.8 m
+    thin, thick = tsdf.cloud(), voxels.cloud()
+    assert len(thin) > 50 and (thin.labels == 4).all()
+    assert len(thick) > 2 * len(thin)
+
+    def interior_error(points: np.ndarray) -> np.ndarray:  # away from the seen area's edges
+        inside = (np.abs(points[:, 0]) < 0.08) & (np.abs(points[:, 1]) < 0.05)
+        assert inside.sum() > 20
+        error: np.ndarray = np.abs(points[inside, 2] - PLANE_Z_M)
+        return error
+
+    assert np.percentile(interior_error(thin.points), 95) < 0.008  # 25 views: sigma / 5 = 4 mm
+    assert np.percentile(interior_error(thick.points), 95) > 0.02  # every voxel a sample hit
+
+
+def test_tsdf_points_need_min_views() -> None:
+    fusion = Fusion(FusionConfig(pixel_stride=1, surface="tsdf", min_views=3))
+    pose = np.eye(4)
+    for expected_empty in (True, True, False):
+        fusion.integrate(
+            *_images(4, 0.9, _view_of_plane(pose)), intrinsics=K, world_from_camera=pose
+        )
+        assert (len(fusion.cloud()) == 0) == expected_empty
 
 
 def test_images_of_another_size_are_refused() -> None:
@@ -93,7 +135,15 @@ def test_images_of_another_size_are_refused() -> None:
 
 
 @pytest.mark.parametrize(
-    "field", [{"voxel_size_m": 0.0}, {"pixel_stride": 0}, {"min_confidence": 2.0}]
+    "field",
+    [
+        {"voxel_size_m": 0.0},
+        {"pixel_stride": 0},
+        {"min_confidence": 2.0},
+        {"surface": "mesh"},
+        {"truncation_voxels": 0.5},
+        {"min_views": 0},
+    ],
 )
 def test_bad_config_values_are_refused(field: dict[str, float]) -> None:
     with pytest.raises(ConfigError):
