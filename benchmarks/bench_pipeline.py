@@ -1,9 +1,14 @@
-"""The whole `semreplay-process run`: frames per second and peak memory against recording length."""
+"""The whole `semreplay-process run`: speed, map quality and peak memory against recording length.
+
+`make bench` runs 150 and 600 simulated frames and bounds a 10-minute run from above by the
+growth without the map; `python -m benchmarks.bench_pipeline ten-minutes --out DIR` measures a
+real 10-minute recording (an hour on 2 cores, see `ten_minutes`).
+"""
 
 from __future__ import annotations
 
 import contextlib
-import os
+import json
 import subprocess
 import sys
 import tempfile
@@ -12,7 +17,7 @@ from pathlib import Path
 
 import psutil
 
-from benchmarks.common import Row
+from benchmarks.common import Row, peak_rss_command, read_peak_gb
 from capture.sim import simulate_recording
 
 AREA = "process run"
@@ -38,6 +43,13 @@ def run() -> list[Row]:
             per_frame_gb[frames], _ = _peak_rss_gb(
                 rec, Path(tmp) / f"odo_{frames}", "--stages", "segmentation"
             )
+            if frames == LONG_FRAMES:  # the map's quality, TSDF surface beside hit voxels
+                f1_tsdf = _phase_f1(Path(tmp) / f"out_{frames}")
+                voxels = Path(tmp) / "voxels.toml"
+                voxels.write_text('[fusion]\nsurface = "voxels"\n')
+                out = Path(tmp) / "voxels"
+                _peak_rss_gb(rec, out, "--no-viz", "--config", str(voxels))
+                f1_voxels = _phase_f1(out)
             rec.unlink()
     slope = (per_frame_gb[LONG_FRAMES] - per_frame_gb[SHORT_FRAMES]) / (LONG_FRAMES - SHORT_FRAMES)
     projected = rss_gb[LONG_FRAMES] + max(slope, 0.0) * (TEN_MINUTES - LONG_FRAMES)
@@ -78,6 +90,18 @@ def run() -> list[Row]:
             )
             for n in (SHORT_FRAMES, LONG_FRAMES)
         ],
+        *[
+            Row(
+                AREA,
+                f"map F1 phase {phase} (all classes), {LONG_FRAMES} frames, TSDF surface",
+                "",
+                f1_tsdf[phase],
+                f1_voxels[phase],
+                'same job with fusion.surface = "voxels"',
+                higher_is_better=True,
+            )
+            for phase in ("I", "III")
+        ],
         Row(
             AREA,
             "peak RSS at 10 min, upper bound (no-map growth extrapolated linearly)",
@@ -88,6 +112,12 @@ def run() -> list[Row]:
             goal="< 4 GB",
         ),
     ]
+
+
+def _phase_f1(out: Path) -> dict[str, float]:
+    """Return the F1 of every refinement phase (all classes) from a run's metrics.json."""
+    phases = json.loads((out / "metrics.json").read_text())["refinement"]["phases"]
+    return {name: float(phase["all"]["f1"]) for name, phase in phases.items()}
 
 
 def _peak_rss_gb(recording: Path, out: Path, *args: str) -> tuple[float, float]:
@@ -101,26 +131,25 @@ def run_sampled(
 ) -> tuple[float, float, list[tuple[float, float]]]:
     """Run `process run` in a child; return its peak RSS (GB), wall time and (s, GB) samples.
 
-    The peak is the kernel's (wait4: this child's own high-water mark, transient allocations
+    The peak is the child's own high-water mark (VmHWM at exit, transient allocations
     included); the samples show how the resident set moves during the run.
     """
-    command = [sys.executable, "-m", "process", "run", str(recording), "--out", str(out), *args]
-    t0 = time.perf_counter()
-    child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    samples: list[tuple[float, float]] = []
-    watched = psutil.Process(child.pid)
-    while True:  # wait4, not poll(): it reaps the child with its own peak RSS
-        pid, status, usage = os.wait4(child.pid, os.WNOHANG)
-        if pid:
-            break
-        with contextlib.suppress(psutil.Error):
-            samples.append((time.perf_counter() - t0, watched.memory_info().rss / 1024**3))
-        time.sleep(every_s)
-    seconds = time.perf_counter() - t0
-    child.returncode = os.waitstatus_to_exitcode(status)
-    if child.returncode != 0:
-        raise RuntimeError(f"{' '.join(command)} exited with {child.returncode}")
-    return usage.ru_maxrss / 1024**2, seconds, samples
+    with tempfile.TemporaryDirectory() as tmp:
+        peak_file = str(Path(tmp) / "peak_kib")
+        job = ("run", str(recording), "--out", str(out), *args)
+        command = peak_rss_command(peak_file, "process", *job)
+        t0 = time.perf_counter()
+        child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        samples: list[tuple[float, float]] = []
+        watched = psutil.Process(child.pid)
+        while child.poll() is None:
+            with contextlib.suppress(psutil.Error):
+                samples.append((time.perf_counter() - t0, watched.memory_info().rss / 1024**3))
+            time.sleep(every_s)
+        seconds = time.perf_counter() - t0
+        if child.returncode != 0:
+            raise RuntimeError(f"{' '.join(command)} exited with {child.returncode}")
+        return read_peak_gb(peak_file), seconds, samples
 
 
 def ten_minutes(recording: Path | None, out: Path) -> int:

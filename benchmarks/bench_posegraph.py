@@ -3,7 +3,7 @@
 The graph is what a handheld recording makes: keyframes every ~12 cm round a 15 m loop, walked
 lap after lap, odometry edges with a small rotation bias (drift) and a loop closure every fourth
 keyframe from the second lap on, a tenth of them false (50 cm off). Each optimiser runs in its own
-child process so that its peak RSS is its own (wait4); the baseline of the same child with the
+child process so that its peak RSS is its own (VmHWM); the baseline of the same child with the
 graph built but not optimised is subtracted. 1,000 keyframes is ~4 minutes of walking; a 10-minute
 recording makes ~2,400 (Open3D would need ~7 GB there, so it is measured at 1,000 only).
 """
@@ -11,8 +11,6 @@ recording makes ~2,400 (Open3D would need ~7 GB there, so it is measured at 1,00
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 import time
 
@@ -20,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from benchmarks.common import Row
+from benchmarks.common import Row, run_with_peak_rss
 from process.loop_closure import Edge, PoseGraph
 
 AREA = "pose graph"
@@ -115,15 +113,9 @@ def _measure(method: str, n: int) -> tuple[float, float, float]:
     peaks = []
     result: dict[str, float] = {}
     for what in (f"none-{method}", method):
-        command = [sys.executable, "-m", "benchmarks.bench_posegraph", what, str(n)]
-        child = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
-        assert child.stdout is not None
-        output = child.stdout.read()
-        _, status, usage = os.wait4(child.pid, 0)
-        if os.waitstatus_to_exitcode(status) != 0:
-            raise RuntimeError(f"{' '.join(command)} failed")
+        peak_gb, _, output = run_with_peak_rss("benchmarks.bench_posegraph", what, str(n))
         result = json.loads(output)
-        peaks.append(usage.ru_maxrss / 1024)
+        peaks.append(peak_gb * 1024)
     return result["seconds"], result["ate_m"], peaks[1] - peaks[0]
 
 

@@ -23,9 +23,9 @@ STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
 class VizConfig:
     """What goes into recording.rrd."""
 
-    # Colour and depth images of every n-th frame (keyframes always): raw 640x480 depth (600 KiB,
-    # twice when it is registered to colour here) and JPEG colour, ~1.3 MB per logged frame, ~24 GB
-    # for 10 minutes at 30 fps with n = 1. Poses and tracking: every frame.
+    # Colour and depth images of every n-th frame (keyframes always): ~400 KiB per logged frame
+    # with aligned depth, ~1.3 MB when depth is registered here (logged twice), so ~24 GB for a
+    # simulated 10 minutes at 30 fps with n = 1. Poses and tracking: every frame.
     images_every_n: int = 1
 
     def __post_init__(self) -> None:
