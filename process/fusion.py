@@ -234,7 +234,8 @@ class Fusion:
         labels = np.where(votes.max(axis=1) > 0, votes.argmax(axis=1), 0).astype(np.uint8)
         if self._tsdf is None:
             return LabelledCloud(centroids, colors, labels)
-        points = self._tsdf.points(min_views=self.cfg.min_views)
+        # a recording with fewer keyframes than min_views still gets a map: all of them must agree
+        points = self._tsdf.points(min_views=min(self.cfg.min_views, max(self.frames, 1)))
         slots = self._slots_of(points, centroids)
         keep = slots >= 0
         return LabelledCloud(points[keep], colors[slots[keep]], labels[slots[keep]])

@@ -55,7 +55,9 @@ class TsdfSurface:
         distortion moves a point by less than a pixel over most of the image.
         """
         depth = np.nan_to_num(np.asarray(depth_m, np.float32), nan=0.0, posinf=0.0)
-        depth[depth < self.min_depth_m] = 0.0
+        depth[(depth < self.min_depth_m) | (depth > self.max_depth_m)] = 0.0
+        if not depth.any():  # Open3D aborts on an image that touches no block
+            return
         image = o3d.t.geometry.Image(o3d.core.Tensor.from_numpy(np.ascontiguousarray(depth)))
         matrix = o3d.core.Tensor.from_numpy(np.asarray(intrinsics.matrix, np.float64))
         extrinsic = o3d.core.Tensor.from_numpy(np.linalg.inv(world_from_camera).astype(np.float64))

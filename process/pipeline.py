@@ -88,7 +88,15 @@ class ReplayPipeline:
             self._write_cloud(outputs.MAP_FUSED, cloud)
             self.viz.set_stage(0)
             self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
-            if "refinement" in self.stages:
+            if "refinement" in self.stages and len(cloud) == 0:
+                note = (
+                    "the fused map is empty: no keyframe pixel had depth within fusion's"
+                    f" {self.cfg.fusion.min_depth_m:g}..{self.cfg.fusion.max_depth_m:g} m;"
+                    " refinement is skipped (check [fusion] and the recording's depth)"
+                )
+                self.viz.log_text(note, level="WARN")
+                logger.warning(note)
+            elif "refinement" in self.stages:
                 self._refine(cloud, gt_cloud)
         self.result.metrics["seconds"] = {k: round(v, 3) for k, v in self._seconds.items()}
         path = self.out_dir / outputs.METRICS

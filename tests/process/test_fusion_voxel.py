@@ -117,11 +117,27 @@ def test_tsdf_surface_of_a_noisy_plane_is_thin_where_voxels_are_thick() -> None:
 def test_tsdf_points_need_min_views() -> None:
     fusion = Fusion(FusionConfig(pixel_stride=1, surface="tsdf", min_views=3))
     pose = np.eye(4)
-    for expected_empty in (True, True, False):
-        fusion.integrate(
-            *_images(4, 0.9, _view_of_plane(pose)), intrinsics=K, world_from_camera=pose
-        )
-        assert (len(fusion.cloud()) == 0) == expected_empty
+    fusion.integrate(*_images(4, 0.9, _view_of_plane(pose)), intrinsics=K, world_from_camera=pose)
+    single = fusion.cloud()  # fewer keyframes than min_views: the one view is the map
+    assert len(single) > 50
+    aside = np.eye(4)
+    aside[0, 3] = 0.3  # sees x in [0.17, 0.43]: beside the first view's [-0.13, 0.13]
+    for _ in range(2):
+        images = _images(4, 0.9, _view_of_plane(aside))
+        fusion.integrate(*images, intrinsics=K, world_from_camera=aside)
+    cloud = fusion.cloud()  # three keyframes, but each place was seen once or twice
+    assert len(cloud) == 0
+    fusion.integrate(*_images(4, 0.9, _view_of_plane(aside)), intrinsics=K, world_from_camera=aside)
+    x = fusion.cloud().points[:, 0]
+    assert len(x) > 50 and x.min() > 0.13  # only the place seen three times
+
+
+def test_a_keyframe_without_depth_in_range_adds_nothing() -> None:
+    fusion = Fusion(FusionConfig(surface="tsdf"))
+    far = np.full((K.height, K.width), 9.0, np.float32)  # beyond max_depth_m everywhere
+    for depth in (np.zeros_like(far), far):
+        fusion.integrate(*_images(4, 0.9, depth), intrinsics=K, world_from_camera=np.eye(4))
+    assert len(fusion.cloud()) == 0
 
 
 def test_images_of_another_size_are_refused() -> None:

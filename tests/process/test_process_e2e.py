@@ -311,3 +311,19 @@ def test_sigterm_is_handled_like_ctrl_c(sim_recording: Path, tmp_path: Path) -> 
     assert child.returncode == 1, err
     assert "error: interrupted; complete files written: config.toml" in err
     assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+
+
+def test_an_empty_map_is_said_and_refinement_skipped(
+    sim_recording: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    config = tmp_path / "near.toml"
+    config.write_text("[fusion]\nmin_depth_m = 0.2\nmax_depth_m = 0.21\n")  # nothing is that near
+    out = tmp_path / "out"
+    args = ["run", str(sim_recording), "--out", str(out), "--config", str(config), "--no-viz"]
+    with caplog.at_level("WARNING"):
+        result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "the fused map is empty" in caplog.text and "0.2..0.21 m" in caplog.text
+    assert len(read_cloud(out / outputs.MAP_FUSED)) == 0
+    assert not (out / outputs.MAP_REFINED).exists()
+    assert "refinement" not in json.loads((out / outputs.METRICS).read_text())
