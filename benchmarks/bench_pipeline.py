@@ -7,17 +7,13 @@ real 10-minute recording (an hour on 2 cores, see `ten_minutes`).
 
 from __future__ import annotations
 
-import contextlib
 import json
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import psutil
-
-from benchmarks.common import Row, peak_rss_command, read_peak_gb
+from benchmarks.common import Row, run_with_peak_rss
 from capture.sim import simulate_recording
 
 AREA = "process run"
@@ -122,34 +118,8 @@ def _phase_f1(out: Path) -> dict[str, float]:
 
 def _peak_rss_gb(recording: Path, out: Path, *args: str) -> tuple[float, float]:
     """Run the job in a fresh child process; return its peak RSS in GB and its wall time."""
-    peak, seconds, _ = run_sampled(recording, out, *args)
-    return peak, seconds
-
-
-def run_sampled(
-    recording: Path, out: Path, *args: str, every_s: float = 0.5
-) -> tuple[float, float, list[tuple[float, float]]]:
-    """Run `process run` in a child; return its peak RSS (GB), wall time and (s, GB) samples.
-
-    The peak is the child's own high-water mark (VmHWM at exit, transient allocations
-    included); the samples show how the resident set moves during the run.
-    """
-    with tempfile.TemporaryDirectory() as tmp:
-        peak_file = str(Path(tmp) / "peak_kib")
-        job = ("run", str(recording), "--out", str(out), *args)
-        command = peak_rss_command(peak_file, "process", *job)
-        t0 = time.perf_counter()
-        child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        samples: list[tuple[float, float]] = []
-        watched = psutil.Process(child.pid)
-        while child.poll() is None:
-            with contextlib.suppress(psutil.Error):
-                samples.append((time.perf_counter() - t0, watched.memory_info().rss / 1024**3))
-            time.sleep(every_s)
-        seconds = time.perf_counter() - t0
-        if child.returncode != 0:
-            raise RuntimeError(f"{' '.join(command)} exited with {child.returncode}")
-        return read_peak_gb(peak_file), seconds, samples
+    child = run_with_peak_rss("process", "run", str(recording), "--out", str(out), *args)
+    return child.peak_gb, child.seconds
 
 
 def ten_minutes(recording: Path | None, out: Path) -> int:
@@ -166,12 +136,15 @@ def ten_minutes(recording: Path | None, out: Path) -> int:
             t0 = time.perf_counter()
             simulate_recording(recording, seed=7, frames=TEN_MINUTES)
             print(f"simulated {TEN_MINUTES} frames in {time.perf_counter() - t0:.0f} s")
-    peak, seconds, samples = run_sampled(recording, out / "run", every_s=2.0)
+    child = run_with_peak_rss(
+        "process", "run", str(recording), "--out", str(out / "run"), sample_every_s=2.0
+    )
+    peak, seconds, samples = child.peak_gb, child.seconds, child.samples
     with (out / "rss.csv").open("w") as f:
         f.write("seconds,rss_gb\n")
         f.writelines(f"{t:.1f},{gb:.4f}\n" for t, gb in samples)
     print(f"{recording}: process run took {seconds:.0f} s; peak RSS {peak:.2f} GB (goal < 4)")
-    for k in range(1, 11):
+    for k in range(1, 11 if samples else 1):
         t_k, gb_k = samples[min(len(samples) - 1, k * len(samples) // 10 - 1)]
         print(f"  {10 * k:3d} % of the run ({t_k:5.0f} s): {gb_k:.2f} GB resident")
     return 0 if peak < GOAL_RSS_GB else 1

@@ -113,9 +113,9 @@ def _measure(method: str, n: int) -> tuple[float, float, float]:
     peaks = []
     result: dict[str, float] = {}
     for what in (f"none-{method}", method):
-        peak_gb, _, output = run_with_peak_rss("benchmarks.bench_posegraph", what, str(n))
-        result = json.loads(output)
-        peaks.append(peak_gb * 1024)
+        child = run_with_peak_rss("benchmarks.bench_posegraph", what, str(n))
+        result = json.loads(child.stdout)
+        peaks.append(child.peak_gb * 1024)
     return result["seconds"], result["ate_m"], peaks[1] - peaks[0]
 
 

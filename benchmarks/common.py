@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 import tempfile
@@ -9,6 +10,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+
+import psutil
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,29 +51,40 @@ def best_of(fn: Callable[[], object], *, repeats: int = 3) -> float:
     return best
 
 
-def peak_rss_command(peak_file: str, module: str, *args: str) -> list[str]:
-    """Return the command that runs `python -m module args` and writes its peak RSS (KiB)."""
-    return [sys.executable, "-m", "benchmarks.peak_rss", peak_file, module, *args]
+@dataclass(frozen=True, slots=True)
+class ChildRun:
+    """What run_with_peak_rss measured of a child process."""
+
+    peak_gb: float  # its own high-water mark (VmHWM at exit)
+    seconds: float
+    stdout: str
+    samples: list[tuple[float, float]]  # (seconds, resident GB), if sampling was asked for
 
 
-def read_peak_gb(peak_file: str) -> float:
-    """Return the peak RSS in GB that benchmarks.peak_rss wrote."""
-    return int(Path(peak_file).read_text()) / 1024**2
-
-
-def run_with_peak_rss(module: str, *args: str) -> tuple[float, float, str]:
-    """Run `python -m module args` in a child; return (its own peak RSS in GB, seconds, stdout).
+def run_with_peak_rss(module: str, *args: str, sample_every_s: float | None = None) -> ChildRun:
+    """Run `python -m module args` in a child and measure its own peak RSS.
 
     The peak is the child's VmHWM at exit (benchmarks.peak_rss), not wait4's ru_maxrss, which
-    includes this (parent) process's memory at the time of the fork.
+    includes this (parent) process's memory at the time of the fork. With sample_every_s the
+    resident set is also sampled while the child runs.
     """
     with tempfile.TemporaryDirectory() as tmp:
-        peak_file = str(Path(tmp) / "peak_kib")
-        command = peak_rss_command(peak_file, module, *args)
+        peak_file = Path(tmp) / "peak_kib"
+        command = [sys.executable, "-m", "benchmarks.peak_rss", str(peak_file), module, *args]
         t0 = time.perf_counter()
-        done = subprocess.run(command, capture_output=True, text=True)
+        child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        watched = psutil.Process(child.pid)
+        samples: list[tuple[float, float]] = []
+        while True:
+            try:  # communicate() keeps what it read when it times out
+                stdout, stderr = child.communicate(timeout=sample_every_s)
+                break
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(psutil.Error):
+                    samples.append((time.perf_counter() - t0, watched.memory_info().rss / 1024**3))
         seconds = time.perf_counter() - t0
-        if done.returncode != 0:
-            tail = done.stderr.strip().splitlines()[-1:] or [""]
-            raise RuntimeError(f"{' '.join(command)} exited with {done.returncode}: {tail[0]}")
-        return read_peak_gb(peak_file), seconds, done.stdout
+        if child.returncode != 0:
+            tail = stderr.strip().splitlines()[-1:] or [""]
+            raise RuntimeError(f"{' '.join(command)} exited with {child.returncode}: {tail[0]}")
+        peak_gb = int(peak_file.read_text()) / 1024**2
+        return ChildRun(peak_gb, seconds, stdout, samples)

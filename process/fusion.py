@@ -192,9 +192,7 @@ class Fusion:
 
     def _slots(self, keys: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
         """Return the data row of each (sorted, unique) key, appending rows for new voxels."""
-        where = np.searchsorted(self._keys, keys)
-        found = where < len(self._keys)
-        found[found] = self._keys[where[found]] == keys[found]
+        where, found = self._find(keys)
         slots = np.empty(len(keys), np.int64)
         slots[found] = self._slot_of_key[where[found]]
         new = ~found
@@ -206,6 +204,15 @@ class Fusion:
             self._keys = np.insert(self._keys, where[new], keys[new])
             self._slot_of_key = np.insert(self._slot_of_key, where[new], slots[new])
         return slots
+
+    def _find(
+        self, keys: npt.NDArray[np.int64]
+    ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
+        """Return each key's position in the sorted keys (or insertion point) and if it is there."""
+        where = np.searchsorted(self._keys, keys)
+        found = where < len(self._keys)
+        found[found] = self._keys[where[found]] == keys[found]
+        return where, found
 
     def _reserve(self, size: int) -> None:
         """Grow the data arrays geometrically so that appending voxels is amortised O(1)."""
@@ -247,9 +254,7 @@ class Fusion:
         slots = np.full(len(points), -1, np.int64)
         if len(points) == 0 or self._size == 0:
             return slots
-        keys = voxel_keys(points.astype(np.float64), self.cfg.voxel_size_m)
-        where = np.minimum(np.searchsorted(self._keys, keys), len(self._keys) - 1)
-        found = self._keys[where] == keys
+        where, found = self._find(voxel_keys(points.astype(np.float64), self.cfg.voxel_size_m))
         slots[found] = self._slot_of_key[where[found]]
         if not found.all():
             from scipy.spatial import cKDTree

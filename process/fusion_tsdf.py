@@ -51,8 +51,8 @@ class TsdfSurface:
     ) -> None:
         """Add one depth image (metres, 0 or NaN = none) seen from a pinhole camera pose.
 
-        Lens distortion is ignored here (Open3D's TSDF is pinhole only); the D435's colour
-        distortion moves a point by less than a pixel over most of the image.
+        Lens distortion is ignored here (Open3D's TSDF is pinhole only); the vote voxels, which
+        give the points their labels, are undistorted.
         """
         depth = np.nan_to_num(np.asarray(depth_m, np.float32), nan=0.0, posinf=0.0)
         depth[(depth < self.min_depth_m) | (depth > self.max_depth_m)] = 0.0

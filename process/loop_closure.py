@@ -79,10 +79,15 @@ class PoseGraph:
         return moved, self.n_loops
 
 
+def _gaussian(edge: Edge) -> gtsam.noiseModel.Base:
+    """Return the edge's Gaussian noise (its information, nudged to be positive definite)."""
+    info = edge.information + np.eye(6) * 1e-9 * max(float(np.trace(edge.information)), 1.0)
+    return gtsam.noiseModel.Gaussian.Information(info)
+
+
 def _noise(edge: Edge, mu: float) -> gtsam.noiseModel.Base:
     """Return the edge's Gaussian noise, robust (Geman-McClure, c^2 = mu) for a loop closure."""
-    info = edge.information + np.eye(6) * 1e-9 * max(float(np.trace(edge.information)), 1.0)
-    gaussian = gtsam.noiseModel.Gaussian.Information(info)
+    gaussian = _gaussian(edge)
     if not edge.uncertain:
         return gaussian
     kernel = gtsam.noiseModel.mEstimator.GemanMcClure.Create(float(np.sqrt(mu)))
@@ -118,8 +123,7 @@ def _line_process(edge: Edge, poses: Sequence[npt.NDArray[np.float64]], mu: floa
     values = gtsam.Values()
     values.insert(edge.target, gtsam.Pose3(poses[edge.target]))
     values.insert(edge.source, gtsam.Pose3(poses[edge.source]))
-    plain = edge.information + np.eye(6) * 1e-9 * max(float(np.trace(edge.information)), 1.0)
-    chi2 = 2.0 * _factor(edge, gtsam.noiseModel.Gaussian.Information(plain)).error(values)
+    chi2 = 2.0 * _factor(edge, _gaussian(edge)).error(values)
     return float((mu / (mu + chi2)) ** 2)
 
 

@@ -132,6 +132,25 @@ def test_tsdf_points_need_min_views() -> None:
     assert len(x) > 50 and x.min() > 0.13  # only the place seen three times
 
 
+def test_tsdf_points_take_the_nearest_vote_within_two_voxels() -> None:
+    # every 16th pixel votes (6.4 cm apart at 2 m); the TSDF integrates every pixel
+    sparse, dense, votes = (
+        Fusion(FusionConfig(pixel_stride=stride, surface=surface))
+        for stride, surface in ((16, "tsdf"), (1, "tsdf"), (16, "voxels"))
+    )
+    pose = np.eye(4)
+    for fusion in (sparse, dense, votes):
+        for _ in range(3):
+            fusion.integrate(
+                *_images(4, 0.9, _view_of_plane(pose)), intrinsics=K, world_from_camera=pose
+            )
+    kept, surface, voted = sparse.cloud(), dense.cloud(), votes.cloud()
+    assert len(voted) < len(kept) < len(surface)  # most points borrow a neighbour's vote
+    assert (kept.labels == 4).all()
+    nearest = np.linalg.norm(surface.points[:, None] - voted.points[None], axis=2).min(axis=1)
+    assert len(kept) == int((nearest <= 2 * 0.02 + 1e-6).sum())  # the rest had no vote near
+
+
 def test_a_keyframe_without_depth_in_range_adds_nothing() -> None:
     fusion = Fusion(FusionConfig(surface="tsdf"))
     far = np.full((K.height, K.width), 9.0, np.float32)  # beyond max_depth_m everywhere
