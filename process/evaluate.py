@@ -9,6 +9,7 @@ class that neither the prediction nor the truth contains is left out.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
@@ -83,6 +84,34 @@ def label_metrics(
     return metrics_from_confusion(confusion_matrix(pred_labels, gt_labels), classes=classes)
 
 
+MIOU_CLASSES: Final = tuple(range(1, NUM_LABELS))  # 0 (unlabelled) is not a class
+
+
+def confusion_iou(
+    cm: npt.NDArray[np.int64], *, classes: Sequence[int] = MIOU_CLASSES
+) -> dict[int, float]:
+    """Return the IoU of each class present in the prediction or the truth of a confusion matrix.
+
+    The one mIoU definition of the project (pipeline metrics, training validation, benchmarks):
+    IoU = TP / (TP + FP + FN) per class that occurs in the truth or the prediction, mean over
+    those classes (`confusion_miou`); by default the labels 1-10.
+    """
+    out: dict[int, float] = {}
+    for label in classes:
+        if not 0 <= label < len(cm):
+            continue
+        counts = class_counts(cm, label)
+        if sum(counts):
+            out[label] = ratios(*counts)["iou"]
+    return out
+
+
+def confusion_miou(cm: npt.NDArray[np.int64], *, classes: Sequence[int] = MIOU_CLASSES) -> float:
+    """Return the mean of `confusion_iou` (nan if no class is present)."""
+    per_class = confusion_iou(cm, classes=classes)
+    return float(np.mean(list(per_class.values()))) if per_class else float("nan")
+
+
 def image_iou(
     pred: npt.NDArray[np.integer], gt: npt.NDArray[np.integer], *, classes: Sequence[int]
 ) -> dict[int, float]:
@@ -91,21 +120,14 @@ def image_iou(
     Truth values outside the label range (e.g. 255, VOC's boundary) are ignored. Pass stacked
     images to get the IoU over a whole set.
     """
-    cm = confusion_matrix(pred, gt)
-    out: dict[int, float] = {}
-    for label in classes:
-        counts = class_counts(cm, label)
-        if sum(counts):
-            out[label] = ratios(*counts)["iou"]
-    return out
+    return confusion_iou(confusion_matrix(pred, gt), classes=classes)
 
 
 def image_miou(
     pred: npt.NDArray[np.integer], gt: npt.NDArray[np.integer], *, classes: Sequence[int]
 ) -> float:
     """Return the mean IoU over the classes present in prediction or truth (nan if none is)."""
-    per_class = image_iou(pred, gt, classes=classes)
-    return float(np.mean(list(per_class.values()))) if per_class else float("nan")
+    return confusion_miou(confusion_matrix(pred, gt), classes=classes)
 
 
 def match_labels(

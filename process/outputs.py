@@ -71,7 +71,7 @@ def summary_table(metrics: Mapping[str, Any]) -> Table:
         if odo.get(key) is not None:
             table.add_row("odometry", key, _fmt(odo[key]))
     seg = metrics.get("segmentation", {})
-    for key in ("keyframes", "ms_per_keyframe", "miou_2d"):
+    for key in ("model", "load_s", "keyframes", "ms_per_keyframe", "miou_2d"):
         if seg.get(key) is not None:
             table.add_row("segmentation", key, _fmt(seg[key]))
     phases = metrics.get("refinement", {}).get("phases", {})

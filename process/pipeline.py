@@ -23,7 +23,7 @@ from capture.recording import (
 from process import outputs
 from process.config import ReplayConfig, to_toml
 from process.depth import DepthProcessor
-from process.evaluate import class_counts, confusion_matrix, ratios
+from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.odometry import Odometry
 from process.trajectory import ate_rmse, path_length, rpe, write_tum
 from viz.logger import Logger
@@ -68,6 +68,7 @@ class ReplayPipeline:
         self._anchor: npt.NDArray[np.float64] | None = None  # map world from the first camera
         self._keyframe_stamps: set[int] = set()
         self._segmenter: Any = None
+        self._seg_model: dict[str, Any] = {}  # which model, why, its load time
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -110,7 +111,7 @@ class ReplayPipeline:
     ) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
         depth = DepthProcessor(self.cfg.depth)
         odometry: Odometry | None = None
-        segmenter = self._make_segmenter() if "segmentation" in self.stages else None
+        segmenter = self._make_segmenter(rec) if "segmentation" in self.stages else None
         self._segmenter = segmenter
         gt_poses: list[tuple[int, Any]] = []
         self._seg_stats = _SegStats()
@@ -169,10 +170,24 @@ class ReplayPipeline:
             self.viz.log_keypoints(track.keypoints_xy, inliers=track.inlier_mask)
         self.viz.log_tracking(track.n_inliers, status=track.status, event=track.event)
 
-    def _make_segmenter(self) -> Any:
+    def _make_segmenter(self, rec: RecordingReader) -> Any:
         from process.segmentation import Segmenter
+        from process.segmentation.models import choose_model
 
-        return Segmenter(self.cfg.segmentation, weights=self.weights, device=self.device)
+        t0 = time.perf_counter()
+        name = rec.metadata.get("device", {}).get("name")
+        choice = choose_model(self.cfg.segmentation, weights=self.weights, device_name=name)
+        segmenter = Segmenter(self.cfg.segmentation, choice=choice, device=self.device)
+        segmenter.warm_up()  # one-off setup is load time, not a keyframe's
+        self._seg_model = {
+            "model": choice.name,
+            "model_reason": choice.reason,
+            "load_s": round(time.perf_counter() - t0, 3),
+        }
+        note = f"segmentation model: {choice.name} ({choice.backend}), because {choice.reason}"
+        self.viz.log_text(note, level="INFO")
+        logger.info(note)
+        return segmenter
 
     def _keyframe(self, frame: RgbdFrame, segmenter: Any) -> None:
         with self._timer("segmentation"):
@@ -242,9 +257,10 @@ class ReplayPipeline:
             self.viz.log_metrics("odometry", {k: v for k, v in odo.items() if isinstance(v, float)})
         self.result.metrics["odometry"] = odo
         if "segmentation" in self.stages:
-            self.result.metrics["segmentation"] = self._seg_stats.summary(
-                self._seconds.get("segmentation", 0.0)
-            )
+            self.result.metrics["segmentation"] = {
+                **self._seg_model,
+                **self._seg_stats.summary(self._seconds.get("segmentation", 0.0)),
+            }
 
     def _write_cloud(self, name: str, cloud: Any) -> None:
         from process.cloud import write_ply
@@ -300,8 +316,7 @@ class _SegStats:
         }
         if self.confusion.sum() == 0:
             return out
-        present = [c for c in range(1, len(LABEL_NAMES)) if self.confusion[c].sum() > 0]
-        iou = {LABEL_NAMES[c]: ratios(*class_counts(self.confusion, c))["iou"] for c in present}
-        out["iou_2d"] = iou
-        out["miou_2d"] = float(np.mean(list(iou.values()))) if iou else None
+        iou = confusion_iou(self.confusion)  # the one mIoU definition (labels 1-10)
+        out["iou_2d"] = {LABEL_NAMES[c]: v for c, v in iou.items()}
+        out["miou_2d"] = confusion_miou(self.confusion) if iou else None
         return out

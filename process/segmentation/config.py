@@ -10,7 +10,8 @@ import numpy.typing as npt
 
 from process.errors import ConfigError
 
-BACKENDS: Final = ("torch", "onnx", "tflite")
+BACKENDS: Final = ("torch", "onnx", "tflite", "combined")
+MODELS: Final = ("auto", "simulator", "voc", "ade20k", "combined")
 DEVICES: Final = ("auto", "cpu", "cuda")
 
 
@@ -18,8 +19,12 @@ DEVICES: Final = ("auto", "cpu", "cuda")
 class SegmentationConfig:
     """The `[segmentation]` section: which weights, which runtime, at what resolution."""
 
-    weights: str = ""  # "" = samples/segmentation.safetensors; a path; or "torchvision:NAME"
-    backend: str = "torch"  # torch | onnx (onnxruntime) | tflite (ai-edge-litert, .tflite weights)
+    # auto = by the recording's device: simulated -> "simulator", real -> "combined" (models.py)
+    model: str = "auto"  # or simulator | voc | ade20k | combined (the models shipped in samples/)
+    weights: str = ""  # a path or "torchvision:NAME": wins over `model`; "" = `model` decides
+    # torch | onnx (onnxruntime) | tflite (ai-edge-litert, .tflite weights) | combined (the
+    # shipped ADE20K and VOC .tflite networks per pixel)
+    backend: str = "torch"
     device: str = "auto"  # auto = CUDA when present (torch backend)
     threads: int = 0  # CPU threads for the runtime; 0 = the runtime's default
     batch_size: int = 4  # keyframes per forward pass
@@ -31,6 +36,10 @@ class SegmentationConfig:
         if self.backend not in BACKENDS:
             raise ConfigError(
                 f"segmentation.backend must be one of {list(BACKENDS)}, got {self.backend!r}"
+            )
+        if self.model not in MODELS:
+            raise ConfigError(
+                f"segmentation.model must be one of {list(MODELS)}, got {self.model!r}"
             )
         if self.device not in DEVICES:
             raise ConfigError(

@@ -1,4 +1,8 @@
-"""2-D segmentation metrics: confusion matrix, IoU per label, mean IoU over labels present."""
+"""2-D segmentation metrics: the confusion matrix and mIoU of `process.evaluate`, re-exported.
+
+One mIoU definition is used everywhere (`process.evaluate.confusion_iou`): IoU per class present
+in the prediction or the truth, mean over those classes, by default the labels 1-10.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +13,8 @@ from capture.recording import NUM_LABELS
 from process import evaluate
 
 IGNORE: int = 255  # label value excluded from training and evaluation
+iou_per_label = evaluate.confusion_iou
+mean_iou = evaluate.confusion_miou
 
 
 def confusion_matrix(
@@ -19,17 +25,3 @@ def confusion_matrix(
     Pixels whose ground truth is IGNORE or outside the label range are not counted.
     """
     return evaluate.confusion_matrix(pred, gt, n_labels=num_labels)
-
-
-def iou_per_label(confusion: npt.NDArray[np.int64]) -> dict[int, float]:
-    """Return TP / (TP + FP + FN) for every label that occurs in the ground truth."""
-    tp = np.diag(confusion).astype(np.float64)
-    gt_count = confusion.sum(axis=1)
-    union = gt_count + confusion.sum(axis=0) - tp
-    return {int(k): float(tp[k] / union[k]) for k in np.flatnonzero(gt_count)}
-
-
-def mean_iou(confusion: npt.NDArray[np.int64]) -> float:
-    """Return the mean IoU over the labels present in the ground truth (NaN if none)."""
-    ious = iou_per_label(confusion)
-    return float(np.mean(list(ious.values()))) if ious else float("nan")

@@ -13,9 +13,17 @@ import numpy.typing as npt
 import torch
 from torch.nn import functional as F  # noqa: N812 (the torch convention)
 
-from capture.recording import STRUCTURAL_LABELS, VOC_TO_LABEL
+from capture.recording import STRUCTURAL_LABELS
 from process.errors import ModelError, StageError
+from process.segmentation.combined import CombinedRuntime
 from process.segmentation.config import Segmentation, SegmentationConfig
+from process.segmentation.models import (
+    ADE20K_TFLITE,
+    VOC_TFLITE,
+    ModelChoice,
+    explicit_choice,
+    shipped,
+)
 from process.segmentation.runtimes import OnnxRuntime, Runtime, TorchRuntime, pick_device
 from process.segmentation.tflite_runtime import TfliteRuntime
 from process.segmentation.weights import load_checkpoint, resolve_weights
@@ -30,12 +38,23 @@ class Segmenter:
     """
 
     def __init__(
-        self, cfg: SegmentationConfig, *, weights: Path | None = None, device: str = "auto"
+        self,
+        cfg: SegmentationConfig,
+        *,
+        weights: Path | None = None,
+        device: str = "auto",
+        choice: ModelChoice | None = None,
     ) -> None:
-        self.cfg = cfg
+        if choice is None:  # without a recording to decide, the simulator checkpoint
+            default = shipped("simulator", "the default when no recording decides", cfg)
+            choice = explicit_choice(cfg, weights=weights) or default
+        self.choice = choice
+        self.cfg = cfg = replace(cfg, backend=choice.backend)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
-        self.weights_path = resolve_weights(weights if weights is not None else cfg.weights)
+        self.weights_path = (
+            ADE20K_TFLITE if choice.path is None else resolve_weights(str(choice.path))
+        )
         self.device = (
             "cpu"
             if cfg.backend != "torch"
@@ -43,8 +62,26 @@ class Segmenter:
         )
         self.short_side_px = 0  # 0: the runtime fixes the input size
         self.checkpoint_info: dict[str, object] = {}
-        self.runtime = self._tflite() if cfg.backend == "tflite" else self._network()
-        logger.info("segmentation: %s on %s (%s)", self.weights_path.name, cfg.backend, self.device)
+        self.runtime = self._make_runtime()
+        logger.info("segmentation: %s on %s (%s)", choice.name, cfg.backend, self.device)
+
+    def _make_runtime(self) -> Runtime:
+        if self.cfg.backend == "combined":
+            if self.choice.path is not None:
+                raise ModelError(
+                    "the combined backend runs the two networks shipped in samples/; leave "
+                    f"weights empty, or choose backend tflite for {self.choice.path}"
+                )
+            return CombinedRuntime(
+                ADE20K_TFLITE, VOC_TFLITE, threads=self.cfg.threads, relabel=self._labels
+            )
+        if self.cfg.backend == "tflite":
+            return self._tflite()
+        return self._network()
+
+    def warm_up(self, height: int = 480, width: int = 640) -> None:
+        """Segment one blank image, so that one-off setup costs are not in the first keyframe."""
+        self.segment(np.zeros((height, width, 3), np.uint8))
 
     def _tflite(self) -> Runtime:
         path = self.weights_path
@@ -52,9 +89,7 @@ class Segmenter:
             raise ModelError(
                 f"the tflite backend needs a .tflite model, found {path.suffix!r}: {path}"
             )
-        return TfliteRuntime(
-            path, threads=self.cfg.threads, class_to_label=self._labels(VOC_TO_LABEL)
-        )
+        return TfliteRuntime(path, threads=self.cfg.threads, relabel=self._labels)
 
     def _network(self) -> Runtime:
         ckpt = load_checkpoint(self.weights_path)

@@ -33,13 +33,18 @@ def test_iou_matches_a_hand_computed_example() -> None:
     pred = np.array([[0, 1, 1, 1], [0, 0, 1, 2], [2, 2, 0, 0]])
     conf = confusion_matrix(pred, gt, num_labels=3)
     # TP / (TP + FP + FN): label 0: 3/(3+1+1); label 1: 3/(3+1+1); label 2: 2/(2+1+1)
-    assert iou_per_label(conf) == pytest.approx({0: 0.6, 1: 0.6, 2: 0.5})
-    assert mean_iou(conf) == pytest.approx(1.7 / 3)
+    assert iou_per_label(conf, classes=range(3)) == pytest.approx({0: 0.6, 1: 0.6, 2: 0.5})
+    assert mean_iou(conf, classes=range(3)) == pytest.approx(1.7 / 3)
+    # By default 0 (unlabelled) is not a class: the mean is over labels 1-10.
+    assert mean_iou(conf) == pytest.approx(1.1 / 2)
 
 
-def test_metrics_skip_labels_absent_from_ground_truth() -> None:
-    conf = confusion_matrix(np.array([0, 5]), np.array([0, 0]))
-    assert iou_per_label(conf) == {0: 0.5}
+def test_metrics_count_labels_in_prediction_or_truth() -> None:
+    # One definition everywhere (process.evaluate): a label only predicted counts, with IoU 0.
+    conf = confusion_matrix(np.array([0, 5, 4]), np.array([0, 0, 4]))
+    assert iou_per_label(conf) == {4: 1.0, 5: 0.0}
+    assert iou_per_label(conf, classes=range(11)) == {0: 0.5, 4: 1.0, 5: 0.0}
+    assert mean_iou(conf) == pytest.approx(0.5)
 
 
 def test_augmentation_moves_colour_and_labels_together() -> None:

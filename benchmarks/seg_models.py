@@ -1,0 +1,136 @@
+"""Each shipped segmentation model side by side: steady ms per keyframe, agreement with the
+combined teacher on held-out real frames, mIoU on unseen simulated rooms.
+
+    python -m benchmarks.seg_models     (a table; `bench_segmentation` adds these as rows)
+
+Real frames: TUM RGB-D `freiburg1_rpy` (../shared/data, or SEMREPLAY_SHARED_DATA), the frames in
+HELD_OUT (the last fifth of the sequence, every 20th, never used to train anything). Agreement
+is the share of pixels whose label equals the combined teacher's: agreement, not accuracy (the
+teacher is not ground truth). Simulated rooms: SIM_SEEDS, never used for training, against
+their exact `/ground_truth/labels`, mIoU by `process.evaluate.confusion_miou` (labels 1-10).
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import LABEL_NAMES, NUM_LABELS, RecordingReader
+from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
+from process.segmentation import SegmentationConfig, Segmenter
+from process.segmentation.models import SHIPPED, shipped
+
+SHARED = Path(
+    os.environ.get("SEMREPLAY_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
+)
+TUM_RGB = SHARED / "tum_fr1_rpy" / "rgb"
+HELD_OUT = tuple(range(580, 723, 20))  # 8 frames
+SIM_SEEDS = (9001, 9002, 9003)
+SIM_FRAMES = 4  # per seed, spread around the room (0.5 fps)
+TEACHER = "combined"
+
+
+@dataclass(frozen=True)
+class ModelFigures:
+    """What was measured of one model."""
+
+    name: str
+    ms: float  # median steady ms per 640x480 keyframe (load and first call excluded)
+    load_s: float
+    agreement: float | None  # with the teacher on held-out real frames
+    miou: float | None  # on the simulated rooms
+    iou: dict[int, float]
+
+
+def read_rgb(path: Path) -> npt.NDArray[np.uint8]:
+    """Return an image file as (H, W, 3) uint8 RGB."""
+    bgr = cv2.imread(str(path))
+    if bgr is None:
+        raise FileNotFoundError(f"cannot read an image from {path}")
+    return np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), np.uint8)
+
+
+def tum_files() -> list[Path]:
+    """Return the TUM fr1_rpy colour files in time order, or [] when the data is absent."""
+    return sorted(TUM_RGB.glob("*.jpg")) if TUM_RGB.is_dir() else []
+
+
+def real_frames() -> list[npt.NDArray[np.uint8]]:
+    """Return the held-out TUM frames (RGB), or [] when the data is absent."""
+    files = tum_files()
+    return [read_rgb(files[i]) for i in HELD_OUT if files]
+
+
+def sim_frames(tmp: Path) -> list[tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8]]]:
+    """Return (colour, ground-truth labels) of the simulated rooms."""
+    from capture.sim import simulate_recording
+
+    out = []
+    for seed in SIM_SEEDS:
+        path = tmp / f"sim_{seed}.mcap"
+        simulate_recording(path, seed=seed, frames=SIM_FRAMES, fps=0.5, width=640, height=480)
+        with RecordingReader(path) as rec:
+            for frame in rec.frames():
+                gt = frame.ground_truth
+                if gt is not None and gt.labels is not None:
+                    out.append((frame.color, gt.labels))
+    return out
+
+
+def measure(names: tuple[str, ...] = tuple(SHIPPED), *, threads: int = 2) -> list[ModelFigures]:
+    """Return the figures of each model (the teacher first, as the others are compared to it)."""
+    real = real_frames()
+    with tempfile.TemporaryDirectory() as tmp:
+        sim = sim_frames(Path(tmp))
+    cfg = SegmentationConfig(threads=threads)
+    teacher: list[npt.NDArray[np.uint8]] = []
+    out = []
+    for name in sorted(names, key=lambda n: n != TEACHER):
+        t0 = time.perf_counter()
+        seg = Segmenter(cfg, choice=shipped(name, "benchmark", cfg), device="cpu")
+        seg.warm_up()
+        load_s = time.perf_counter() - t0
+        times, labels = [], []
+        for image in real or [sim[0][0]]:
+            t0 = time.perf_counter()
+            labels.append(seg.segment(image).labels)
+            times.append(time.perf_counter() - t0)
+        if name == TEACHER:
+            teacher = labels
+        agreement = (
+            float(np.mean([np.mean(a == b) for a, b in zip(labels, teacher, strict=True)]))
+            if real
+            else None
+        )
+        cm = np.zeros((NUM_LABELS, NUM_LABELS), np.int64)
+        for color, gt in sim:
+            cm += confusion_matrix(seg.segment(color).labels, gt)
+        iou = confusion_iou(cm)
+        ms = 1000 * statistics.median(times)
+        out.append(ModelFigures(name, ms, load_s, agreement, confusion_miou(cm), iou))
+    return out
+
+
+def main() -> int:
+    """Print each model's figures."""
+    for f in measure():
+        agree = "n/a" if f.agreement is None else f"{f.agreement:.3f}"
+        per = ", ".join(f"{LABEL_NAMES[k]} {v:.2f}" for k, v in f.iou.items())
+        print(
+            f"{f.name}: {f.ms:.0f} ms/keyframe (load {f.load_s:.2f} s), agreement with "
+            f"{TEACHER} {agree}, sim mIoU {f.miou:.3f} [{per}]"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
