@@ -117,8 +117,9 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     assert {"frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"} <= set(odo)
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
     seg = metrics["segmentation"]
-    assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d"} <= set(seg)
+    assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d", "load_s"} <= set(seg)
     assert 0.0 <= seg["miou_2d"] <= 1.0
+    assert seg["model"] == "simulator" and "simulated recording" in seg["model_reason"]
     phases = metrics["refinement"]["phases"]
     assert set(phases) == {"I", "II", "III"}
     for per_class in phases.values():

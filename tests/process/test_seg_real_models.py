@@ -1,0 +1,187 @@
+"""The real-image networks shipped in samples/: label table, TFLite runtime, combination, choice."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from capture.recording import NUM_LABELS, VOC_TO_LABEL, RecordingReader
+from process.errors import ConfigError, ModelError
+from process.evaluate import confusion_iou, confusion_matrix
+from process.segmentation import SegmentationConfig, Segmenter, ade20k
+from process.segmentation.combined import combine
+from process.segmentation.models import (
+    ADE20K_TFLITE,
+    SAMPLES,
+    VOC_TFLITE,
+    choose_model,
+    is_simulated,
+    shipped,
+)
+from process.segmentation.tflite_runtime import TfliteRuntime, label_map_for
+from process.segmentation.weights import SAMPLES_CHECKPOINT
+
+pytest.importorskip("ai_edge_litert", reason="the tflite extra (ai-edge-litert) is not installed")
+
+
+# -- the ADE20K label table ------------------------------------------------------------------
+def test_every_ade20k_class_is_mapped_by_its_name() -> None:
+    shipped_words = [
+        line.split("\t")[1].strip()
+        for line in (SAMPLES / "deeplabv3_mnv2_ade20k_labels.txt").read_text().splitlines()
+    ]
+    assert len(ade20k.ADE20K_NAMES) == len(shipped_words) == 150
+    # The model's labels.txt keeps the first word of each objectInfo150 name.
+    assert [n.split()[0] for n in ade20k.ADE20K_NAMES] == shipped_words
+    assert set(ade20k.ADE20K_TO_LABEL) == set(ade20k.ADE20K_NAMES)
+    named = [n for names in ade20k._BY_LABEL.values() for n in names]
+    assert sorted(set(named) - set(ade20k.ADE20K_NAMES)) == []  # no typo falls to clutter
+    assert len(named) == len(set(named))  # no name under two labels
+    assert len(ade20k.ADE20K_CLASS_TO_LABEL) == 151 and ade20k.ADE20K_CLASS_TO_LABEL[0] == 0
+    assert all(0 <= v < NUM_LABELS for v in ade20k.ADE20K_CLASS_TO_LABEL)
+
+
+@pytest.mark.parametrize(
+    ("name", "label"),
+    [
+        ("wall", 3), ("floor", 2), ("ceiling", 1), ("table", 4), ("desk", 4), ("chair", 5),
+        ("armchair", 5), ("swivel chair", 5), ("person", 6), ("plant", 7), ("sofa", 8),
+        ("screen", 9), ("monitor", 9), ("crt screen", 9), ("computer", 9), ("bottle", 10),
+        ("cabinet", 10), ("bed", 10), ("sky", 0), ("rug", 2), ("windowpane", 3), ("lamp", 10),
+    ],
+)  # fmt: skip
+def test_ade20k_spot_checks(name: str, label: int) -> None:
+    assert ade20k.ADE20K_TO_LABEL[name] == label
+    index = ade20k.ADE20K_NAMES.index(name) + 1  # output 0 is "other"
+    assert ade20k.ADE20K_CLASS_TO_LABEL[index] == label
+
+
+# -- the TFLite runtime ----------------------------------------------------------------------
+def test_label_maps_follow_the_class_count(tmp_path: Path) -> None:
+    assert label_map_for(21, tmp_path) == VOC_TO_LABEL
+    assert label_map_for(151, tmp_path) == ade20k.ADE20K_CLASS_TO_LABEL
+    with pytest.raises(ModelError, match=r"has 7 classes; expected one of 21 .*151"):
+        label_map_for(7, tmp_path)
+
+
+def test_float_ade20k_and_int8_voc_models_load_with_their_class_counts() -> None:
+    ade = TfliteRuntime(ADE20K_TFLITE, threads=1)
+    voc = TfliteRuntime(VOC_TFLITE, threads=1)
+    assert (ade.n_classes, voc.n_classes) == (151, 21)
+    assert ade.fixed_input_size == voc.fixed_input_size == (513, 513)
+    image = np.random.default_rng(0).integers(0, 255, (1, 513, 513, 3), dtype=np.uint8)
+    for runtime in (ade, voc):
+        probs = runtime(image)
+        assert probs.shape == (1, NUM_LABELS, 257, 257)
+        assert torch.allclose(probs.sum(dim=1), torch.ones(1, 257, 257), atol=1e-4)
+    assert float(voc(image)[:, 1:4].max()) == 0.0  # VOC never says ceiling, floor or wall
+    with pytest.raises(ModelError, match="151 classes but the label map has 21"):
+        TfliteRuntime(ADE20K_TFLITE, class_to_label=VOC_TO_LABEL)
+
+
+def test_ade20k_finds_the_structure_of_a_simulated_room(sim_recording: Path) -> None:
+    seg = Segmenter(SegmentationConfig(model="ade20k", threads=2))
+    with RecordingReader(sim_recording) as rec:
+        frame = next(iter(rec.frames()))
+    assert frame.ground_truth is not None and frame.ground_truth.labels is not None
+    gt = frame.ground_truth.labels
+    labels = seg.segment(frame.color).labels
+    iou = confusion_iou(confusion_matrix(labels, gt))
+    assert iou.get(3, 0.0) > 0.5  # the walls (0.67 over 12 unseen frames, benchmarks.seg_models)
+    structural = np.isin(gt, (1, 2, 3))
+    assert np.mean(np.isin(labels[structural], (1, 2, 3))) > 0.7
+
+
+# -- the combination -------------------------------------------------------------------------
+def _probs(*pixels: tuple[int, float]) -> torch.Tensor:
+    """Return (1, L, 1, n) probabilities: per pixel its label and that label's probability.
+
+    The rest is spread evenly over the labels other than person, plant and sofa.
+    """
+    out = torch.zeros(1, NUM_LABELS, 1, len(pixels))
+    for i, (label, p) in enumerate(pixels):
+        rest = [v for v in (0, 1, 2, 3, 4, 5, 9, 10) if v != label]
+        out[0, rest, 0, i] = (1 - p) / len(rest)
+        out[0, label, 0, i] = p
+    return out
+
+
+def test_combination_takes_structure_from_ade20k_and_confident_objects() -> None:
+    ade = _probs((3, 0.9), (3, 0.9), (5, 0.6), (5, 0.9), (10, 0.4), (0, 0.6), (4, 0.7))
+    voc = _probs((0, 0.99), (9, 0.8), (4, 0.7), (4, 0.7), (0, 0.9), (5, 0.55), (4, 0.4))
+    out = combine(ade, voc)
+    labels = out.argmax(dim=1)[0, 0].tolist()
+    # wall kept; VOC's confident monitor over a wall; the more confident of two objects (VOC
+    # 0.7 > ADE 0.6, then ADE 0.9 > VOC 0.7); ADE's unsure clutter where VOC sees nothing;
+    # VOC's chair where ADE has background; ADE's table where VOC is unsure.
+    assert labels == [3, 9, 4, 5, 10, 5, 4]
+    conf = out.max(dim=1).values[0, 0]
+    assert conf.tolist() == pytest.approx([0.9, 0.8, 0.7, 0.9, 0.4, 0.55, 0.7])
+
+
+def test_ade20k_person_plant_sofa_need_vocs_support() -> None:
+    ade = _probs((6, 0.8), (6, 0.8), (7, 0.6), (8, 0.9))
+    ade[0, 3, 0, 0] = 0.15  # wall is ADE20K's runner-up at the first pixel
+    ade[0, :, 0, 0] /= ade[0, :, 0, 0].sum()
+    voc = _probs((0, 0.95), (6, 0.45), (0, 0.95), (0, 0.95))
+    labels = combine(ade, voc).argmax(dim=1)[0, 0].tolist()
+    # pixel 0: VOC sees no person -> ADE20K's next label; pixel 1: VOC supports the person
+    # (0.45 >= 0.1) but is not confident itself -> ADE20K's person stands.
+    assert labels[:2] == [3, 6]
+    assert labels[2] != 7 and labels[3] != 8
+    out = combine(ade, voc)
+    assert torch.allclose(out.sum(dim=1), torch.ones(1, 1, 4), atol=1e-5)
+
+
+def test_combined_backend_segments_and_can_drop_structure(sim_recording: Path) -> None:
+    with RecordingReader(sim_recording) as rec:
+        color = next(iter(rec.frames())).color
+    seg = Segmenter(SegmentationConfig(backend="combined", threads=2)).segment(color)
+    assert seg.labels.shape == color.shape[:2] and seg.labels.dtype == np.uint8
+    assert float(seg.confidence.min()) >= 0.0 and float(seg.confidence.max()) <= 1.0
+    assert np.isin(seg.labels, (1, 2, 3)).mean() > 0.3
+    cfg = SegmentationConfig(model="combined", threads=2, structural_to_background=True)
+    no_structure = Segmenter(cfg).segment(color)
+    assert not np.isin(no_structure.labels, (1, 2, 3)).any()
+    with pytest.raises(ModelError, match="combined backend runs the two networks"):
+        Segmenter(SegmentationConfig(backend="combined", weights=str(SAMPLES_CHECKPOINT)))
+
+
+# -- which model a run uses ------------------------------------------------------------------
+def test_simulated_recordings_get_the_simulator_checkpoint() -> None:
+    assert is_simulated("Simulated Intel RealSense D435") and not is_simulated(
+        "Intel RealSense D435"
+    )
+    choice = choose_model(SegmentationConfig(), device_name="Simulated Intel RealSense D435")
+    assert (choice.name, choice.path, choice.backend) == ("simulator", SAMPLES_CHECKPOINT, "torch")
+    assert "simulated recording" in choice.reason
+
+
+@pytest.mark.parametrize("device", ["Intel RealSense D435", "tum_fr1_rpy", None])
+def test_real_recordings_get_the_real_image_networks(device: str | None) -> None:
+    choice = choose_model(SegmentationConfig(), device_name=device)
+    assert (choice.name, choice.backend) == ("combined", "combined")
+    assert "real recording" in choice.reason
+
+
+def test_weights_then_config_win_over_the_device(tmp_path: Path) -> None:
+    real, sim = "Intel RealSense D435", "Simulated Intel RealSense D435"
+    ckpt = tmp_path / "mine.safetensors"
+    choice = choose_model(SegmentationConfig(model="voc"), weights=ckpt, device_name=real)
+    assert (choice.name, choice.path, choice.backend) == ("mine.safetensors", ckpt, "torch")
+    assert choice.reason == "--weights was given"
+    tfl = choose_model(SegmentationConfig(weights=str(VOC_TFLITE)), device_name=sim)
+    assert (tfl.path, tfl.backend) == (
+        VOC_TFLITE,
+        "tflite",
+    ) and "segmentation.weights" in tfl.reason
+    ade = choose_model(SegmentationConfig(model="ade20k"), device_name=sim)
+    assert (ade.name, ade.path, ade.backend) == ("ade20k", ADE20K_TFLITE, "tflite")
+    onnx = choose_model(SegmentationConfig(backend="onnx"), device_name=real)
+    assert (onnx.name, onnx.backend) == ("simulator", "onnx")
+    assert shipped("simulator", "x").path == SAMPLES_CHECKPOINT
+    with pytest.raises(ConfigError, match=r"segmentation\.model must be one of"):
+        SegmentationConfig(model="deeplab")
