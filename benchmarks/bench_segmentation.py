@@ -10,6 +10,9 @@ published; its FLOPs counted on our exact re-implementation of its layout at our
 2 FLOPs per multiply-add: torchvision's table lists 10.45 "GFLOPS" at 520x520, which are
 multiply-adds, 20.9 GFLOPs in this count).
 mIoU: the shipped checkpoint on simulated scenes of seeds it never saw (goal >= 0.80).
+Per shipped model (`benchmarks.seg_models`: simulator checkpoint, VOC, ADE20K, combined): steady
+ms per 640x480 keyframe (load excluded), pixel agreement with the combined teacher on held-out
+real TUM fr1_rpy frames (agreement, not accuracy), mIoU on unseen simulated rooms.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy.typing as npt
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
+from benchmarks import seg_models
 from benchmarks.common import Row
 from capture.recording import RecordingReader
 from process.segmentation import SegmentationConfig, Segmenter, confusion_matrix, mean_iou
@@ -118,6 +122,23 @@ def _row(metric: str, unit: str, ours: float, reference: float, source: str, **k
     return Row("segmentation", metric, unit, ours, reference, source, **kw)
 
 
+def _model_rows() -> list[Row]:
+    rows = []
+    for f in seg_models.measure(threads=THREADS):
+        name = f"model {f.name}"
+        rows.append(_row(f"{name}: ms per keyframe, steady (load {f.load_s:.1f} s)", "ms", f.ms,
+                         PAPER_MS, PAPER))  # fmt: skip
+        if f.agreement is not None and f.name != seg_models.TEACHER:
+            metric = f"{name}: agreement with {seg_models.TEACHER} on TUM fr1_rpy held-out frames"
+            rows.append(_row(metric, "", f.agreement, 0.85, "issue 11 goal (student)",
+                             higher_is_better=True, goal=">= 0.85"))  # fmt: skip
+        if f.miou is not None:
+            metric = f"{name}: mIoU, simulated seeds {seg_models.SIM_SEEDS}"
+            rows.append(_row(metric, "", f.miou, 0.80, "issue 5 goal", higher_is_better=True,
+                             goal=">= 0.80"))  # fmt: skip
+    return rows
+
+
 def run() -> list[Row]:
     """Measure the shipped checkpoint on 2 threads at 640x480."""
     torch.set_num_threads(THREADS)
@@ -132,6 +153,7 @@ def run() -> list[Row]:
     ours, tv = _gflops(model, net_h, net_w), _gflops(build_model(TV), net_h, net_w)
     metric = f"GFLOPs per keyframe at {net_w}x{net_h} (2 per multiply-add)"
     rows.append(_row(metric, "GFLOP", ours, tv, TV_COUNTED))
+    rows += _model_rows()
     miou = _unseen_miou(SAMPLES_CHECKPOINT)
     if miou is not None:
         metric = f"mIoU, simulated seeds {UNSEEN_SEEDS} never seen in training"

@@ -169,9 +169,16 @@ def train(
     epochs: Annotated[int, typer.Option(min=1)] = 10,
     weights: Annotated[Path | None, typer.Option(help="checkpoint to start from")] = None,
     seed: Annotated[int, typer.Option()] = 0,
+    teacher: Annotated[
+        str | None,
+        typer.Option(
+            help="label recordings without ground truth with this network: combined, voc, ade20k"
+        ),
+    ] = None,
+    teacher_every_nth: Annotated[int, typer.Option(min=1, help="teacher-labelled frames")] = 4,
     verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
 ) -> None:
-    """Fine-tune the segmentation network on recordings that carry ground-truth labels."""
+    """Fine-tune the segmentation network on recordings with ground-truth labels (or a teacher)."""
     from capture.errors import CaptureError
     from process.errors import ReplayError
 
@@ -179,7 +186,16 @@ def train(
     try:
         from process.segmentation.train import train as train_fn
 
-        train_fn(recordings, out=out, val=val or None, epochs=epochs, init=weights, seed=seed)
+        train_fn(
+            recordings,
+            out=out,
+            val=val or None,
+            epochs=epochs,
+            init=weights,
+            seed=seed,
+            teacher=teacher,
+            teacher_every_nth=teacher_every_nth,
+        )
         typer.echo(f"checkpoint written: {out} (use it with --weights {out})")
     except (ReplayError, CaptureError) as err:
         _fail(str(err))

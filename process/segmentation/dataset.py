@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,23 +31,40 @@ class LabelledImages:
 
 
 def load_labelled(
-    recordings: Sequence[Path], *, short_side_px: int, every_nth: int = 1
+    recordings: Sequence[Path],
+    *,
+    short_side_px: int,
+    every_nth: int = 1,
+    teacher: Callable[[npt.NDArray[np.uint8]], npt.NDArray[np.uint8]] | None = None,
+    teacher_every_nth: int = 1,
 ) -> LabelledImages:
-    """Read every `every_nth` frame with ground-truth labels, resized to the given short side."""
+    """Read every `every_nth` frame with ground-truth labels, resized to the given short side.
+
+    With a `teacher` (colour -> labels), recordings without ground-truth labels give every
+    `teacher_every_nth` frame labelled by it (distillation).
+    """
     colors: list[npt.NDArray[np.uint8]] = []
     labels: list[npt.NDArray[np.uint8]] = []
     for path in recordings:
         with RecordingReader(Path(path)) as rec:
-            if not rec.has_ground_truth_labels:
+            taught = teacher is not None and not rec.has_ground_truth_labels
+            if not rec.has_ground_truth_labels and not taught:
                 raise StageError(
-                    "training needs /ground_truth/labels; this recording has topics "
-                    f"{sorted(rec.topics)}: {path}"
+                    "training needs /ground_truth/labels (or --teacher); this recording has "
+                    f"topics {sorted(rec.topics)}: {path}"
                 )
+            step = teacher_every_nth if taught else every_nth
             for frame in rec.frames():
                 gt = frame.ground_truth
-                if frame.index % every_nth or gt is None or gt.labels is None:
+                if frame.index % step:
                     continue
-                color, label = _resize_pair(frame.color, gt.labels, short_side_px)
+                if teacher is not None and taught:
+                    truth = teacher(frame.color)
+                elif gt is None or gt.labels is None:
+                    continue
+                else:
+                    truth = gt.labels
+                color, label = _resize_pair(frame.color, truth, short_side_px)
                 colors.append(color)
                 labels.append(label)
     if not colors:

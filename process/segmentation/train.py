@@ -22,6 +22,7 @@ from process.segmentation.dataset import (
     load_labelled,
 )
 from process.segmentation.deeplab import PRESETS, DeepLab, build_model
+from process.segmentation.distill import make_teacher
 from process.segmentation.metrics import IGNORE, iou_per_label, mean_iou
 from process.segmentation.validation import (
     evaluate,
@@ -108,8 +109,14 @@ def train(
     cfg: TrainConfig | None = None,
     progress: bool = True,
     on_epoch: Callable[[EpochStats], None] | None = None,
+    teacher: str | None = None,
+    teacher_every_nth: int = 4,
 ) -> TrainResult:
-    """Train on labelled recordings; write the best (by val mIoU) checkpoint to `out`."""
+    """Train on labelled recordings; write the best (by val mIoU) checkpoint to `out`.
+
+    With `teacher` (a shipped real-image model, `distill.TEACHERS`), recordings without
+    ground-truth labels train on the teacher's labels of every `teacher_every_nth` frame.
+    """
     cfg = cfg or TrainConfig()
     if epochs < 1:
         raise ConfigError(f"epochs must be >= 1, got {epochs}")
@@ -117,7 +124,13 @@ def train(
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    data = load_labelled(recordings, short_side_px=cfg.short_side_px, every_nth=cfg.every_nth)
+    data = load_labelled(
+        recordings,
+        short_side_px=cfg.short_side_px,
+        every_nth=cfg.every_nth,
+        teacher=make_teacher(teacher, threads=cfg.threads) if teacher else None,
+        teacher_every_nth=teacher_every_nth,
+    )
     val_data = load_labelled(val, short_side_px=cfg.short_side_px) if val else None
     model = build_model(cfg.arch)
     if init is not None:
@@ -159,7 +172,10 @@ def train(
         score = stats.val_miou if stats.val_miou is not None else float(epoch)
         if score >= best[0]:
             best = (score, epoch)
-            _save(model, out, cfg=cfg, seed=seed, recordings=recordings, val=val, stats=stats)
+            _save(
+                model, out, cfg=cfg, seed=seed, recordings=recordings, val=val, stats=stats,
+                teacher=teacher,
+            )  # fmt: skip
     return TrainResult(Path(out), history, best[1])
 
 
@@ -230,6 +246,7 @@ def _save(
     recordings: Sequence[Path],
     val: Sequence[Path] | None,
     stats: EpochStats,
+    teacher: str | None = None,
 ) -> None:
     info = {
         "trained_by": "process.segmentation.train",
@@ -239,6 +256,7 @@ def _save(
         "recordings": [Path(p).name for p in recordings],
         "val_recordings": [Path(p).name for p in val or []],
         "val_miou": stats.val_miou,
+        "teacher": teacher,
     }
     ckpt = checkpoint_from_model(model, short_side_px=cfg.short_side_px, info=info)
     save_checkpoint(ckpt, Path(out), half=cfg.half)
