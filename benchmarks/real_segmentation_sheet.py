@@ -4,7 +4,7 @@
 
 Six frames of TUM RGB-D `freiburg1_rpy` (../shared/data/tum_fr1_rpy, a real office desk seen by a
 Kinect), each segmented by the four shipped models, coloured with the RECORDING.md label colours
-(`capture.recording.LABEL_COLORS`) over a faint grey copy of the image, with a legend. It also
+(`capture.recording.LABEL_COLORS`), with a legend. It also
 prints, per model, the share of pixels of each label over the six frames.
 """
 
@@ -27,16 +27,11 @@ FRAMES = (60, 180, 240, 420, 540, 660)  # indices into the sorted rgb/ listing
 MODELS = ("voc", "ade20k", "combined", "simulator")
 TITLES = ("image", "PASCAL VOC (int8)", "ADE20K (float)", "combined", "simulator checkpoint")
 TILE = (320, 240)
-UNLABELLED_ALPHA = 0.0  # unlabelled pixels show the grey image only
 
 
-def colourise(labels: npt.NDArray[np.uint8], image: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
-    """Return the label colours blended over a grey copy of the image (RGB)."""
-    palette = np.array(LABEL_COLORS, np.float32)
-    grey = cv2.cvtColor(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
-    alpha = np.where(labels == 0, UNLABELLED_ALPHA, 0.7)[..., None]
-    out = alpha * palette[labels] + (1 - alpha) * grey.astype(np.float32)
-    return np.asarray(out, np.uint8)
+def colourise(labels: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """Return the labels in their RECORDING.md colours (RGB; unlabelled is black)."""
+    return np.asarray(np.array(LABEL_COLORS, np.uint8)[labels], np.uint8)
 
 
 def _text(img: npt.NDArray[np.uint8], text: str, xy: tuple[int, int], scale: float = 0.55) -> None:
@@ -73,7 +68,7 @@ def sheet(threads: int = 1) -> tuple[npt.NDArray[np.uint8], dict[str, npt.NDArra
         for row, (_, image) in zip(rows, images, strict=True):
             labels = seg.segment(image).labels
             counts[name] += np.bincount(labels.ravel(), minlength=len(LABEL_NAMES))
-            tile = cv2.resize(colourise(labels, image), TILE, interpolation=cv2.INTER_AREA)
+            tile = cv2.resize(colourise(labels), TILE, interpolation=cv2.INTER_NEAREST)
             row.append(np.asarray(tile, np.uint8))
     header = np.full((30, TILE[0] * len(TITLES), 3), 40, np.uint8)
     for i, title in enumerate(TITLES):
