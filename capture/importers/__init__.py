@@ -28,7 +28,6 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.errors import ImportFormatError
-from capture.frames import Intrinsics
 from capture.importers.common import FPS_WITHOUT_STAMPS, _Dataset, detect_kind
 from capture.importers.redwood import PRIMESENSE_K, SLAMBOOK_K, _load_redwood
 from capture.importers.seven_scenes import SEVEN_SCENES_INVALID_DEPTH, SEVEN_SCENES_K, _load_7scenes
@@ -39,7 +38,8 @@ from capture.importers.tum import (
     _load_tum,
     associate,
 )
-from capture.mcap_writer import RecordingWriter
+from capture.recording.frames import Intrinsics
+from capture.recording.writer import RecordingWriter
 
 __all__ = [
     "FPS_WITHOUT_STAMPS",

@@ -28,8 +28,8 @@ from helpers_capture import (
 )
 
 from capture.errors import CameraError, CaptureError
-from capture.mcap_threaded import StreamFrame, ThreadedWriter
-from capture.realsense import RecordConfig, RecordResult, RecordStatus, record
+from capture.realsense.record import RecordConfig, RecordResult, RecordStatus, record
+from capture.realsense.sink import StreamFrame, ThreadedWriter
 from capture.recording import RecordingReader, RecordingWriter
 
 CONFIG = RecordConfig(

@@ -12,10 +12,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
-from capture.frames import Extrinsics, Intrinsics, RgbdFrame
-from capture.mcap_messages import McapMessageWriter
+from capture.recording import messages as m
+from capture.recording.frames import Extrinsics, Intrinsics, RgbdFrame
+from capture.recording.ros_writer import McapMessageWriter
 
 logger = logging.getLogger(__name__)
 

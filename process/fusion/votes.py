@@ -12,7 +12,7 @@ import numpy.typing as npt
 from capture.recording import NUM_LABELS, Intrinsics
 from process.cloud import LabelledCloud
 from process.errors import ConfigError, StageError
-from process.fusion_tsdf import TsdfSurface
+from process.fusion.tsdf import TsdfSurface
 
 logger = logging.getLogger(__name__)
 

@@ -15,11 +15,11 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
-from capture.frames import RgbdFrame
-from capture.mcap_index import McapIndex, TopicInfo, read_index, stream_records
-from capture.mcap_sync import (
+from capture.recording import messages as m
+from capture.recording.frames import RgbdFrame
+from capture.recording.index import McapIndex, TopicInfo, read_index, stream_records
+from capture.recording.sync import (
     FrameSync,
     Topics,
     decode_color,

@@ -6,7 +6,7 @@ Everything another package needs of the recording format is importable from here
 from __future__ import annotations
 
 from capture.errors import RecordingError
-from capture.frames import (
+from capture.recording.frames import (
     LABEL_COLORS,
     LABEL_NAMES,
     NUM_LABELS,
@@ -18,9 +18,9 @@ from capture.frames import (
     Intrinsics,
     RgbdFrame,
 )
-from capture.mcap_reader import RecordingReader, TopicInfo
-from capture.mcap_writer import RecordingWriter
-from capture.ros_msgs import DEFAULT_NAMESPACE, GT_CLOUD_ATTACHMENT
+from capture.recording.messages import DEFAULT_NAMESPACE, GT_CLOUD_ATTACHMENT
+from capture.recording.reader import RecordingReader, TopicInfo
+from capture.recording.writer import RecordingWriter
 
 __all__ = [
     "DEFAULT_NAMESPACE",

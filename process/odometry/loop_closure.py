@@ -10,12 +10,12 @@ import gtsam
 import numpy as np
 import numpy.typing as npt
 
-from process.odometry_features import Keyframe
-from process.odometry_matching import match
-from process.odometry_pnp import PnpSolver, information_from_points
+from process.odometry.features import Keyframe
+from process.odometry.matching import match
+from process.odometry.pnp import PnpSolver, information_from_points
 
 if TYPE_CHECKING:
-    from process.odometry_config import OdometryConfig
+    from process.odometry.config import OdometryConfig
 
 _FIXED = gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)  # holds keyframe 0 where it is
 

@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from capture.errors import CaptureError
-from capture.frames import Extrinsics, Intrinsics
-from capture.mcap_threaded import ThreadedWriter, finish_recording
-from capture.mcap_writer import RecordingWriter
+from capture.realsense.sink import ThreadedWriter, finish_recording
+from capture.recording.frames import Extrinsics, Intrinsics
+from capture.recording.writer import RecordingWriter
 
 
 @dataclass(frozen=True, slots=True)

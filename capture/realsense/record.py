@@ -1,7 +1,7 @@
 """A live D435, or a RealSense recording (.bag, .db3), into an MCAP recording via pyrealsense2.
 
-The only module that imports pyrealsense2 (lazily); capture.realsense_device and
-capture.realsense_camera are handed it. Both paths run the sensors with frame callbacks that copy
+The only module that imports pyrealsense2 (lazily); capture.realsense.device and
+capture.realsense.camera are handed it. Both paths run the sensors with frame callbacks that copy
 each frame into a `ThreadedWriter`; the device is injectable, so the tests drive the same code with
 an `rs.software_device`. Sensors are used directly rather than through `rs.pipeline`: a pipeline
 over a played-back file cannot pace non-real-time playback by its consumer, and dedupes nothing; a
@@ -19,7 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from capture.errors import CameraError
-from capture.mcap_session import (
+from capture.realsense.camera import Camera
+from capture.realsense.device import configure, find_device, intrinsics_of, select_streams
+from capture.realsense.session import (
     RecordConfig,
     RecordResult,
     RecordStatus,
@@ -28,8 +30,6 @@ from capture.mcap_session import (
     start_sink,
     watch,
 )
-from capture.realsense_camera import Camera
-from capture.realsense_device import configure, find_device, intrinsics_of, select_streams
 
 __all__ = [
     "Camera",
