@@ -20,7 +20,7 @@ from typing import Any
 
 from capture.errors import CameraError
 from capture.realsense.camera import Camera
-from capture.realsense.device import configure, find_device, intrinsics_of, select_streams
+from capture.realsense.device import configure, find_device, select_streams
 from capture.realsense.session import (
     RecordConfig,
     RecordResult,
@@ -30,20 +30,6 @@ from capture.realsense.session import (
     start_sink,
     watch,
 )
-
-__all__ = [
-    "Camera",
-    "RecordConfig",
-    "RecordResult",
-    "RecordStatus",
-    "configure",
-    "convert",
-    "find_device",
-    "intrinsics_of",
-    "record",
-    "rs_module",
-    "select_streams",
-]
 
 
 def rs_module() -> Any:

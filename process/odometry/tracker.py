@@ -13,8 +13,9 @@ from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
 from process.odometry.keyframes import needs_keyframe, refine_densely
 from process.odometry.locate import Located, Locator
-from process.odometry.loop_closure import Edge, LoopCloser, PoseGraph
+from process.odometry.loop_closure import LoopCloser
 from process.odometry.pnp import information_from_points, rigid_inverse
+from process.odometry.pose_graph import Edge, PoseGraph
 from process.odometry.state import TrackState, match_arrays
 
 if TYPE_CHECKING:

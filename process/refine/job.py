@@ -16,7 +16,8 @@ from capture.recording import GT_CLOUD_ATTACHMENT, LABEL_NAMES
 from process.cloud import LabelledCloud, parse_ply, read_cloud, write_atomic, write_ply
 from process.evaluate import cloud_phase_metrics
 from process.refine import ClassClustering, RefineConfig, RefineResult, refine
-from process.refine.steplog import StepLogger, log_steps
+from process.refine.steplog import log_steps
+from viz.logger import Logger
 
 logger = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ def refine_and_log(
     cloud: LabelledCloud,
     cfg: RefineConfig,
     *,
-    viz: StepLogger,
+    viz: Logger,
     up: npt.NDArray[np.float64] | None = None,
     gt_cloud_ply: bytes | None = None,
 ) -> tuple[LabelledCloud, dict[str, Any]]:
