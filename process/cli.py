@@ -154,7 +154,9 @@ def refine(
         out.mkdir(parents=True, exist_ok=True)
         outputs.write_text_atomic(out / outputs.CONFIG, to_toml(cfg))
         metrics = refine_file(cloud, out_dir=out, cfg=cfg.refine, gt_cloud=ground_truth)
-        Console().print(outputs.summary_table({"refinement": metrics}))
+        Console().print(
+            outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
+        )
         typer.echo(f"outputs in {out}: {outputs.MAP_REFINED}, {outputs.METRICS}, {outputs.CONFIG}")
     except ReplayError as err:
         _fail(str(err))
