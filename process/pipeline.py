@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -77,8 +78,12 @@ class ReplayPipeline:
         weights: Path | None = None,
         device: str = "auto",
         progress: bool = True,
+        follow_idle_s: float | None = None,
+        stop: threading.Event | None = None,
     ) -> None:
         self.recording = recording
+        self.follow_idle_s = follow_idle_s  # follow a recording still being written
+        self.stop = stop or threading.Event()  # set: stop following and finish with what came
         self.out_dir = out_dir
         self.cfg = cfg
         self.stages = stages
@@ -95,6 +100,7 @@ class ReplayPipeline:
         self._fusion = KeyframeFusion(cfg.fusion) if "fusion" in stages else None
         self._keyframes: Worker[_Keyframe] = Worker("keyframes", self._on_keyframe)
         self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
+        self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -102,7 +108,10 @@ class ReplayPipeline:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self._write_config()
         try:
-            with RecordingReader(self.recording) as rec:
+            reader = RecordingReader(
+                self.recording, follow_idle_s=self.follow_idle_s, stop=self.stop
+            )
+            with reader as rec:
                 self._note_ground_truth(rec)
                 ground_truth = self._replay(rec)
                 gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
@@ -145,7 +154,8 @@ class ReplayPipeline:
         _limit_threads()
         gt_stamps: list[int] = []
         gt_poses: list[npt.NDArray[np.float64]] = []
-        bar = tqdm(total=len(rec), unit="frame", dynamic_ncols=True, disable=not self.progress)
+        total = None if rec.following else len(rec)
+        bar = tqdm(total=total, unit="frame", dynamic_ncols=True, disable=not self.progress)
         with bar:  # closed on errors too, so that an error line starts a line of its own
             for frame in self._timed_frames(rec):
                 gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
@@ -154,6 +164,8 @@ class ReplayPipeline:
                     gt_poses.append(gt_pose)
                 self._track(frame, depth, gt_pose)
                 bar.update()
+                if rec.following:
+                    self._lag_s.append((time.time_ns() - frame.stamp_ns) / 1e9)
         return Trajectory.of(gt_stamps, gt_poses)
 
     def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
@@ -344,6 +356,15 @@ class ReplayPipeline:
                 "frame loop": round(max(0.0, 1.0 - keyframes_behind - logging_behind), 3),
             },
         }
+        if self._lag_s:
+            lag = np.array(self._lag_s)
+            self.result.metrics[
+                "follow"
+            ] = {  # seconds behind the camera, when each frame was tracked
+                "lag_s_median": round(float(np.median(lag)), 3),
+                "lag_s_p95": round(float(np.percentile(lag, 95)), 3),
+                "lag_s_max": round(float(lag.max()), 3),
+            }
         odo = self.result.metrics.get("odometry")
         seconds = self.clock.wall.get("odometry", 0.0) + self.clock.wall.get("depth", 0.0)
         if odo is not None:
