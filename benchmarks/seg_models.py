@@ -1,7 +1,7 @@
 """Each shipped segmentation model side by side: steady ms per keyframe, agreement with the
 combined teacher on held-out real frames, mIoU on unseen simulated rooms.
 
-    python -m benchmarks.seg_models     (a table; `bench_segmentation` adds these as rows)
+    python -m benchmarks.seg_models [checkpoint ...]   (`bench_segmentation` adds these as rows)
 
 Real frames: TUM RGB-D `freiburg1_rpy` (../shared/data, or SEMREPLAY_SHARED_DATA), the frames in
 HELD_OUT (the last fifth of the sequence, every 20th, never used to train anything). Agreement
@@ -27,7 +27,7 @@ import numpy.typing as npt
 from capture.recording import LABEL_NAMES, NUM_LABELS, RecordingReader
 from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.segmentation import SegmentationConfig, Segmenter
-from process.segmentation.models import SHIPPED, shipped
+from process.segmentation.models import SHIPPED, ModelChoice, shipped
 
 SHARED = Path(
     os.environ.get("SEMREPLAY_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
@@ -86,17 +86,28 @@ def sim_frames(tmp: Path) -> list[tuple[npt.NDArray[np.uint8], npt.NDArray[np.ui
     return out
 
 
-def measure(names: tuple[str, ...] = tuple(SHIPPED), *, threads: int = 2) -> list[ModelFigures]:
-    """Return the figures of each model (the teacher first, as the others are compared to it)."""
+def measure(
+    names: tuple[str, ...] = tuple(SHIPPED),
+    *,
+    threads: int = 2,
+    checkpoints: tuple[Path, ...] = (),
+) -> list[ModelFigures]:
+    """Return the figures of each model (the teacher first, as the others are compared to it).
+
+    `checkpoints`: more models (our checkpoints, e.g. a distilled student) to measure.
+    """
     real = real_frames()
     with tempfile.TemporaryDirectory() as tmp:
         sim = sim_frames(Path(tmp))
     cfg = SegmentationConfig(threads=threads)
     teacher: list[npt.NDArray[np.uint8]] = []
     out = []
-    for name in sorted(names, key=lambda n: n != TEACHER):
+    choices = [shipped(n, "benchmark", cfg) for n in sorted(names, key=lambda n: n != TEACHER)]
+    choices += [ModelChoice(p.name, p, "torch", "benchmark") for p in checkpoints]
+    for choice in choices:
+        name = choice.name
         t0 = time.perf_counter()
-        seg = Segmenter(cfg, choice=shipped(name, "benchmark", cfg), device="cpu")
+        seg = Segmenter(cfg, choice=choice, device="cpu")
         seg.warm_up()
         load_s = time.perf_counter() - t0
         times, labels = [], []
@@ -120,9 +131,9 @@ def measure(names: tuple[str, ...] = tuple(SHIPPED), *, threads: int = 2) -> lis
     return out
 
 
-def main() -> int:
-    """Print each model's figures."""
-    for f in measure():
+def main(argv: list[str]) -> int:
+    """Print each model's figures (argv: more checkpoints to measure)."""
+    for f in measure(checkpoints=tuple(Path(a) for a in argv)):
         agree = "n/a" if f.agreement is None else f"{f.agreement:.3f}"
         per = ", ".join(f"{LABEL_NAMES[k]} {v:.2f}" for k, v in f.iou.items())
         print(
@@ -133,4 +144,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))
