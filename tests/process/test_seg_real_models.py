@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -185,3 +186,26 @@ def test_weights_then_config_win_over_the_device(tmp_path: Path) -> None:
     assert shipped("simulator", "x").path == SAMPLES_CHECKPOINT
     with pytest.raises(ConfigError, match=r"segmentation\.model must be one of"):
         SegmentationConfig(model="deeplab")
+
+
+def test_a_run_says_which_model_ran_and_why(recording: Path, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from process import outputs
+    from process.cli import app
+
+    def run(*extra: str) -> dict[str, object]:
+        out = tmp_path / f"out{len(extra)}"
+        args = ["run", str(recording), "--out", str(out), "--stages", "segmentation", "--no-viz"]
+        result = CliRunner().invoke(app, [*args, *extra])
+        assert result.exit_code == 0, result.output
+        seg: dict[str, object] = json.loads((out / outputs.METRICS).read_text())["segmentation"]
+        return seg
+
+    real = run()  # the fixture's device is "synthetic": not the simulator, so a real camera
+    assert real["model"] == "combined" and "real recording" in str(real["model_reason"])
+    assert isinstance(real["load_s"], float) and real["load_s"] > 0
+    mine = run("--weights", str(SAMPLES_CHECKPOINT))
+    assert (
+        mine["model"] == SAMPLES_CHECKPOINT.name and mine["model_reason"] == "--weights was given"
+    )
