@@ -92,7 +92,7 @@ def shipped(name: str, reason: str, cfg: SegmentationConfig | None = None) -> Mo
     """Return the choice of a shipped model by name."""
     backend, spec, _ = SHIPPED[name]
     if name == "simulator" and cfg is not None:
-        backend = cfg.backend if cfg.backend in ("torch", "onnx") else "torch"
+        backend = cfg.backend if cfg.backend != "combined" else "torch"  # tflite: an error
     path = SAMPLES_CHECKPOINT if name == "simulator" else (Path(spec) if spec else None)
     return ModelChoice(name=name, path=path, backend=backend, reason=reason)
 

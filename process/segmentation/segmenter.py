@@ -87,7 +87,8 @@ class Segmenter:
         path = self.weights_path
         if path.suffix != ".tflite":
             raise ModelError(
-                f"the tflite backend needs a .tflite model, found {path.suffix!r}: {path}"
+                f"the tflite backend needs a .tflite model, found {path.suffix!r} (or set "
+                f"segmentation.model = 'voc' or 'ade20k'): {path}"
             )
         return TfliteRuntime(path, threads=self.cfg.threads, relabel=self._labels)
 
