@@ -98,7 +98,11 @@ def _run(
     viz = (
         NullLogger()
         if no_viz
-        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem)
+        else RerunLogger(
+            outputs.temporary_path(rrd),
+            recording_name=recording.stem,
+            **cfg.viz.logger_options(),
+        )
     )
     pipeline = ReplayPipeline(
         recording, out_dir=out, cfg=cfg, stages=stage_list, viz=viz, weights=weights, device=device

@@ -21,16 +21,36 @@ STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
 
 @dataclasses.dataclass(frozen=True, slots=True)
 class VizConfig:
-    """What goes into recording.rrd."""
+    """What goes into recording.rrd: compact by default; full fidelity with compress = false.
 
-    # Colour and depth images of every n-th frame (keyframes always): ~400 KiB per logged frame
-    # with aligned depth, ~1.3 MB when depth is registered here (logged twice), so ~24 GB for a
-    # simulated 10 minutes at 30 fps with n = 1. Poses and tracking: every frame.
+    By default (measured on TUM fr1_rpy, 640x480): colour of every frame as JPEG (~45 KB), depth
+    as lossless PNG (~76 KB) on keyframes and every depth_every_n-th frame, segmentation on
+    keyframes, poses and tracking every frame. Full fidelity (`compress = false`,
+    `depth_every_n = 1`): raw colour and depth of every frame, ~1 MB a frame.
+    """
+
+    # Colour and keypoints of every n-th frame (keyframes always); poses and tracking: every frame.
     images_every_n: int = 1
+    # Depth (raw and registered) of every n-th frame; keyframes' depth always.
+    depth_every_n: int = 10
+    # Colour and confidence as JPEG, depth as lossless PNG; false: raw images.
+    compress: bool = True
+    jpeg_quality: int = 85
 
     def __post_init__(self) -> None:
-        if self.images_every_n < 1:
-            raise ConfigError(f"viz.images_every_n must be >= 1, got {self.images_every_n}")
+        for name in ("images_every_n", "depth_every_n"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"viz.{name} must be >= 1, got {getattr(self, name)}")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise ConfigError(f"viz.jpeg_quality must be in 1..100, got {self.jpeg_quality}")
+
+    def logger_options(self) -> dict[str, Any]:
+        """Return the keyword arguments of viz.rerun_log.RerunLogger for these settings."""
+        return {
+            "compress": self.compress,
+            "jpeg_quality": self.jpeg_quality,
+            "depth_every_n": self.depth_every_n,
+        }
 
 
 @dataclasses.dataclass(frozen=True, slots=True)

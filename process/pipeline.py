@@ -138,9 +138,9 @@ class ReplayPipeline:
             world_from_camera = self._anchor @ track.world_from_camera
             images = track.is_keyframe or frame.index % self.cfg.viz.images_every_n == 0
             if images:
-                self.viz.log_frame(frame)
+                self.viz.log_frame(frame, keyframe=track.is_keyframe)
                 if not frame.aligned:
-                    self.viz.log_registered_depth(depth_m)
+                    self.viz.log_registered_depth(depth_m, keyframe=track.is_keyframe)
             self._log_track(track, world_from_camera, keypoints=images)
             if gt_pose is not None:
                 gt_poses.append((frame.stamp_ns, gt_pose))

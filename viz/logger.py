@@ -49,11 +49,11 @@ class NullLogger:
     def log_calibration(self, color_intrinsics: Intrinsics) -> None:
         """Log the colour camera's pinhole, once, static."""
 
-    def log_frame(self, frame: RgbdFrame) -> None:
-        """Log a frame's colour (JPEG) and raw depth."""
+    def log_frame(self, frame: RgbdFrame, *, keyframe: bool = False) -> None:
+        """Log a frame's colour and, at the depth rate or on keyframes, its raw depth."""
 
-    def log_registered_depth(self, depth_m: FloatArray) -> None:
-        """Log depth registered to the colour camera, in metres."""
+    def log_registered_depth(self, depth_m: FloatArray, *, keyframe: bool = False) -> None:
+        """Log depth registered to the colour camera, in metres (at the depth rate)."""
 
     def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
         """Log the camera pose of the current frame and mark keyframes."""

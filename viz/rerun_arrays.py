@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Final
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 import rerun as rr
@@ -15,10 +16,33 @@ from viz.logger import FloatArray, IntArray
 _MM_PER_M: Final = 1000.0
 
 
-def depth_image(depth_m: FloatArray) -> rr.DepthImage:
-    """Return a depth image in whole millimetres (half the bytes of float32 in the .rrd)."""
+# PNG level 1 with run-length matching: on TUM fr1_rpy depth ~76 KB in ~5 ms a frame, smaller
+# and faster than level 6 (~82 KB, ~150 ms) or rerun's own compress(compress_level=1) (~106 KB).
+_PNG_PARAMS: Final = [
+    cv2.IMWRITE_PNG_COMPRESSION,
+    1,
+    cv2.IMWRITE_PNG_STRATEGY,
+    cv2.IMWRITE_PNG_STRATEGY_RLE,
+]
+
+
+def millimetres(depth_m: FloatArray) -> npt.NDArray[np.uint16]:
+    """Return depth in whole millimetres (0 = none), clipped to uint16."""
     mm: npt.NDArray[np.uint16] = np.clip(depth_m * _MM_PER_M + 0.5, 0.0, 65535.0).astype(np.uint16)
-    return rr.DepthImage(mm, meter=_MM_PER_M)
+    return mm
+
+
+def depth_image(depth_m: FloatArray) -> rr.DepthImage:
+    """Return a raw depth image in whole millimetres (half the bytes of float32 in the .rrd)."""
+    return rr.DepthImage(millimetres(depth_m), meter=_MM_PER_M)
+
+
+def depth_png(depth_m: FloatArray) -> rr.EncodedDepthImage:
+    """Return depth in whole millimetres as a lossless 16-bit PNG."""
+    ok, png = cv2.imencode(".png", millimetres(depth_m), _PNG_PARAMS)
+    if not ok:
+        raise ValueError(f"could not encode a depth image of shape {np.shape(depth_m)} as PNG")
+    return rr.EncodedDepthImage(blob=png.tobytes(), media_type="image/png", meter=_MM_PER_M)
 
 
 def points(points: FloatArray, name: str) -> npt.NDArray[np.float32]:
