@@ -123,3 +123,39 @@ def wait_for(predicate: Any, *, timeout_s: float, every_s: float = 2.0) -> bool:
         if time.monotonic() > deadline:
             return False
         time.sleep(every_s)
+
+
+@contextmanager
+def served(rrd: Path, *, port: int, grpc_port: int) -> Iterator[str]:
+    """Run `semreplay-view rrd --web` and yield the address it prints; stop it afterwards."""
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "viz", str(rrd), "--web"]
+    command += ["--port", str(port), "--grpc-port", str(grpc_port)]
+    view = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+    try:
+        assert view.stdout is not None
+        line = view.stdout.readline()  # "Serving FILE at ADDRESS (Ctrl-C stops)"
+        assert " at http://" in line, f"semreplay-view printed {line!r}"
+        yield line.split(" at ", 1)[1].split()[0]
+    finally:
+        view.terminate()
+        view.wait(timeout=30)
+
+
+def screenshot(driver: Any) -> np.ndarray[Any, np.dtype[np.uint8]]:
+    """Return the browser's viewport as an RGB array."""
+    import cv2
+
+    png = np.frombuffer(driver.get_screenshot_as_png(), np.uint8)
+    return np.asarray(cv2.cvtColor(cv2.imdecode(png, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB))
+
+
+def near(
+    image: np.ndarray[Any, np.dtype[np.uint8]], colour: tuple[int, int, int], *, tol: int = 30
+) -> np.ndarray[Any, np.dtype[np.bool_]]:
+    """Return where an RGB image is within tol of colour in every channel."""
+    diff = np.abs(image.astype(np.int16) - np.array(colour, np.int16))
+    mask: np.ndarray[Any, np.dtype[np.bool_]] = np.all(diff <= tol, axis=-1)
+    return mask
