@@ -148,8 +148,10 @@ def screenshot(driver: Any) -> np.ndarray[Any, np.dtype[np.uint8]]:
     """Return the browser's viewport as an RGB array."""
     import cv2
 
-    png = np.frombuffer(driver.get_screenshot_as_png(), np.uint8)
-    return np.asarray(cv2.cvtColor(cv2.imdecode(png, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB))
+    bgr = cv2.imdecode(np.frombuffer(driver.get_screenshot_as_png(), np.uint8), cv2.IMREAD_COLOR)
+    assert bgr is not None, "the browser's screenshot is not a PNG"
+    rgb: np.ndarray[Any, np.dtype[np.uint8]] = np.ascontiguousarray(bgr[..., ::-1], np.uint8)
+    return rgb
 
 
 def near(
