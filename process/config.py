@@ -23,19 +23,19 @@ STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
 class VizConfig:
     """What goes into recording.rrd: compact by default; full fidelity with compress = false.
 
-    By default (measured on TUM fr1_rpy, 640x480): colour of every frame as JPEG (~45 KB), depth
-    as lossless PNG (~76 KB) on keyframes and every depth_every_n-th frame, segmentation on
-    keyframes, poses and tracking every frame. Full fidelity (`compress = false`,
-    `depth_every_n = 1`): raw colour and depth of every frame, ~1 MB a frame.
+    By default (measured on TUM fr1_rpy, 640x480): colour of every frame as JPEG (~34 KB), depth
+    as lossless PNG (~95 KB) on keyframes and every depth_every_n-th frame (once a second at
+    30 fps), segmentation on keyframes, poses and tracking every frame. Full fidelity
+    (`compress = false`, `depth_every_n = 1`): raw colour and depth of every frame, ~1 MB a frame.
     """
 
     # Colour and keypoints of every n-th frame (keyframes always); poses and tracking: every frame.
     images_every_n: int = 1
     # Depth (raw and registered) of every n-th frame; keyframes' depth always.
-    depth_every_n: int = 10
+    depth_every_n: int = 30
     # Colour and confidence as JPEG, depth as lossless PNG; false: raw images.
     compress: bool = True
-    jpeg_quality: int = 85
+    jpeg_quality: int = 75
 
     def __post_init__(self) -> None:
         for name in ("images_every_n", "depth_every_n"):

@@ -18,6 +18,7 @@ MAP_REFINED: Final = "map_refined.ply"
 TRAJECTORY: Final = "trajectory.tum"
 METRICS: Final = "metrics.json"
 CONFIG: Final = "config.toml"
+PREVIEW: Final = "preview.png"  # top view of the refined (else fused) map, named in metrics.json
 
 
 def temporary_path(path: Path) -> Path:

@@ -248,10 +248,17 @@ class ReplayPipeline:
 
     def _write_cloud(self, name: str, cloud: Any) -> None:
         from process.cloud import write_ply
+        from process.preview import write_preview
 
         path = self.out_dir / name
         write_ply(path, cloud)
         self.result.written.append(path)
+        # the picture of the last map written: the refined one replaces the fused one's
+        picture = write_preview(
+            self.out_dir / outputs.PREVIEW, cloud.points, cloud.labels, up_hint=self._up_vector()
+        )
+        self.result.written += [] if picture in self.result.written else [picture]
+        self.result.metrics["preview"] = picture.name
 
     def _refine(self, cloud: Any, gt_cloud_ply: bytes | None) -> None:
         from process.refine_job import refine_and_log

@@ -53,8 +53,8 @@ class RerunLogger(NullLogger):
         application_id: str = layout.APPLICATION_ID,
         recording_name: str,
         compress: bool = True,
-        jpeg_quality: int = 85,
-        depth_every_n: int = 10,
+        jpeg_quality: int = 75,
+        depth_every_n: int = 30,
     ) -> None:
         """Open rrd_path for writing.
 

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 import pytest
-from helpers_viz import read_rrd, rerun_verify
+from helpers_viz import RrdContents, read_rrd, rerun_verify
 from typer.testing import CliRunner
 
 from capture.recording import RecordingReader, RecordingWriter
@@ -29,6 +29,7 @@ OUTPUTS = (
     outputs.TRAJECTORY,
     outputs.METRICS,
     outputs.CONFIG,
+    outputs.PREVIEW,
 )
 PER_FRAME_ENTITIES = (
     "/world/camera",
@@ -112,7 +113,8 @@ def test_the_trajectory_is_tum_and_near_the_ground_truth(
 
 def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     metrics = json.loads((run_twice["out"] / outputs.METRICS).read_text())
-    assert set(metrics) == {"odometry", "segmentation", "refinement", "seconds"}
+    assert set(metrics) == {"odometry", "segmentation", "refinement", "seconds", "preview"}
+    assert metrics["preview"] == outputs.PREVIEW
     odo = metrics["odometry"]
     assert {"frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"} <= set(odo)
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
@@ -126,6 +128,19 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     for params in metrics["refinement"]["dbscan"].values():
         assert {"k", "eps_m", "min_pts"} <= set(params)
     assert set(metrics["seconds"]) >= {"depth", "odometry", "segmentation", "fusion", "refinement"}
+
+
+def test_the_preview_is_a_small_top_view_of_the_refined_map(run_twice: dict[str, Any]) -> None:
+    import cv2
+
+    from capture.recording import LABEL_COLORS
+
+    path = run_twice["out"] / outputs.PREVIEW
+    assert path.stat().st_size < 200_000
+    rgb = np.asarray(cv2.imread(str(path)), np.uint8)[..., ::-1]
+    refined = read_cloud(run_twice["out"] / outputs.MAP_REFINED)
+    main_label = int(np.bincount(refined.labels[refined.labels != 1]).argmax())  # not ceiling
+    assert np.all(rgb == LABEL_COLORS[main_label], axis=-1).sum() > 500
 
 
 def test_a_recording_without_ground_truth_runs_and_says_so(
@@ -246,6 +261,41 @@ def test_images_every_n_thins_the_rrd_but_keeps_every_pose_and_keyframe(
     assert 3 <= rgb_rows <= 3 + keyframes < 30  # frames 0, 10, 20 and the keyframes
     assert contents.rows[("/world/camera/image/keypoints", "frame")] == rgb_rows
     assert contents.rows[("/world/camera", "frame")] == 30
+
+
+def _odometry_rrd(sim_recording: Path, tmp_path: Path, viz: str) -> RrdContents:
+    """Run the odometry stage with a [viz] section; return the .rrd and the keyframe count."""
+    config = tmp_path / "viz.toml"
+    config.write_text(f"[viz]\n{viz}\n")
+    out = tmp_path / "out"
+    args = ["run", str(sim_recording), "--out", str(out), "--stages", "odometry"]
+    result = runner.invoke(app, [*args, "--config", str(config)])
+    assert result.exit_code == 0, result.output
+    return read_rrd(out / outputs.RRD)
+
+
+def test_by_default_colour_is_every_frame_and_depth_on_keyframes_and_every_nth(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    contents = _odometry_rrd(sim_recording, tmp_path, "depth_every_n = 20")
+    keyframes = set(contents.values("/world/trajectory/keyframes", "frame"))
+    assert 0 < len(keyframes) < 30
+    assert contents.rows[("/world/camera/image/rgb", "frame")] == 30
+    assert set(contents.values("/world/camera/image/rgb", "EncodedImage:media_type")) == {
+        "image/jpeg"
+    }
+    for entity in ("/world/camera/image/depth", "/world/camera/image/depth_registered"):
+        assert set(contents.values(entity, "frame")) == keyframes | {0, 20}, entity
+
+
+def test_full_fidelity_logs_raw_colour_and_depth_of_every_frame(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    contents = _odometry_rrd(sim_recording, tmp_path, "compress = false\ndepth_every_n = 1")
+    for entity in ("rgb", "depth", "depth_registered"):
+        assert contents.rows[(f"/world/camera/image/{entity}", "frame")] == 30, entity
+    assert contents.values("/world/camera/image/rgb", "Image:buffer").size == 30 * 480 * 640 * 3
+    assert "DepthImage:buffer" in contents.columns["/world/camera/image/depth"]
 
 
 def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(

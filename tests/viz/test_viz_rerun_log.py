@@ -70,7 +70,7 @@ def test_only_our_timelines_are_written(logged: RrdContents) -> None:
     assert timelines == {layout.TIMELINE_FRAME, layout.TIMELINE_CAPTURE_TIME}
 
 
-def test_depth_and_segmentation_are_on_keyframes_and_every_tenth_frame(
+def test_depth_and_segmentation_are_on_keyframes_and_every_nth_frame(
     logged: RrdContents,
 ) -> None:
     for entity in (layout.DEPTH, layout.DEPTH_REGISTERED):
