@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 import pytest
-from helpers_viz import RrdContents, read_rrd, rerun_verify
+from helpers_viz import RrdContents, assert_rrd_verifies, read_rrd, rerun_verify
 from typer.testing import CliRunner
 
 from capture.recording import RecordingReader, RecordingWriter
@@ -163,6 +163,7 @@ def test_a_recording_without_ground_truth_runs_and_says_so(
     assert metrics["odometry"]["frames"] == 5
     assert "ate_rmse_m" not in metrics["odometry"]
     assert "no ground truth" in caplog.text
+    assert_rrd_verifies(out / outputs.RRD)
 
 
 def test_an_unfinished_recording_replays_its_recovered_frames(
@@ -264,7 +265,7 @@ def test_images_every_n_thins_the_rrd_but_keeps_every_pose_and_keyframe(
 
 
 def _odometry_rrd(sim_recording: Path, tmp_path: Path, viz: str) -> RrdContents:
-    """Run the odometry stage with a [viz] section; return the .rrd and the keyframe count."""
+    """Run the odometry stage with a [viz] section; return what its .rrd holds."""
     config = tmp_path / "viz.toml"
     config.write_text(f"[viz]\n{viz}\n")
     out = tmp_path / "out"

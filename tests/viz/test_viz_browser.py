@@ -25,6 +25,7 @@ from helpers_browser import (
     wait_for,
     write_small_rrd,
 )
+from helpers_viz import assert_rrd_verifies
 
 from capture.recording import LABEL_COLORS, LABEL_NAMES
 
@@ -59,6 +60,7 @@ def _views_drawn(image: np.ndarray[Any, np.dtype[np.uint8]]) -> dict[str, bool]:
 
 def test_the_web_viewer_draws_the_views_in_headless_chromium(tmp_path: Path) -> None:
     rrd = write_small_rrd(tmp_path / "small.rrd")
+    assert_rrd_verifies(rrd)
     t0 = time.monotonic()
     shots: list[np.ndarray[Any, np.dtype[np.uint8]]] = []
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from helpers_viz import assert_rrd_verifies
 
 from viz.rerun_log import RerunLogger
 
@@ -42,6 +43,7 @@ def test_a_stop_signal_ends_the_viewer_and_removes_the_temporary_folder(
 ) -> None:
     rrd = tmp_path / "empty.rrd"
     RerunLogger(rrd, recording_name="cleanup").close()
+    assert_rrd_verifies(rrd)
     ports = ["--port", str(_free_port()), "--grpc-port", str(_free_port())]
     command = [sys.executable, "-m", "viz", str(rrd), "--web", *ports]
     view = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

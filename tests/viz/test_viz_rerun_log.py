@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 import pytest
-from helpers_viz import RrdContents, read_rrd, rerun_verify
+from helpers_viz import RrdContents, assert_rrd_verifies, read_rrd, rerun_verify
 
 from capture.recording import LABEL_NAMES, RecordingReader
 from viz import layout
@@ -340,6 +340,7 @@ def test_bad_arguments_raise_one_line_value_errors(tmp_path: Path, call, match: 
     ):
         call(log)
     assert "\n" not in str(info.value)
+    assert_rrd_verifies(tmp_path / "bad.rrd")  # what was logged before the error stays readable
 
 
 def test_empty_inputs_of_a_lost_frame_are_logged_and_verify(tmp_path: Path) -> None:
