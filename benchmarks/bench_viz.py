@@ -132,7 +132,7 @@ def _rows(name: str, frames: list[Frame], folder: Path) -> list[Row]:
     kb["plain"] = (folder / f"{name}_plain.rrd").stat().st_size / 1000 / len(frames)
     size = f".rrd per frame, {name}"
     goal = f"<= {GOAL_KB:g} KB" if name.startswith("real") else ""
-    full = "full fidelity ([viz] compress = false, depth_every_n = 1), same frames"
+    full = "full fidelity (viz.compress = false, viz.depth_every_n = 1), same frames"
     return [
         Row("viz", f"{size}, default", "KB", kb["default"], kb["full"], full, goal=goal),
         Row("viz", f"{size}, full fidelity", "KB", kb["full"], kb["plain"], "plain rr.Image"),
