@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Final
+from typing import Final, Literal
 
 import cv2
 import numpy as np
@@ -44,6 +44,19 @@ def depth_png(depth_m: FloatArray) -> rr.EncodedDepthImage:
     if not ok:
         raise ValueError(f"could not encode a depth image of shape {np.shape(depth_m)} as PNG")
     return rr.EncodedDepthImage(blob=png.tobytes(), media_type="image/png", meter=_MM_PER_M)
+
+
+def image(
+    pixels: npt.NDArray[np.uint8], model: Literal["RGB", "L"], *, jpeg_quality: int | None
+) -> rr.Image | rr.EncodedImage:
+    """Return an image as JPEG at jpeg_quality, or raw for None."""
+    raw = rr.Image(pixels, color_model=model)
+    return raw if jpeg_quality is None else raw.compress(jpeg_quality=jpeg_quality)
+
+
+def depth(depth_m: FloatArray, *, png: bool) -> rr.DepthImage | rr.EncodedDepthImage:
+    """Return depth in millimetres as a lossless PNG, or raw."""
+    return depth_png(depth_m) if png else depth_image(depth_m)
 
 
 def points(points: FloatArray, name: str) -> npt.NDArray[np.float32]:

@@ -10,7 +10,7 @@ import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final, Literal
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
@@ -75,7 +75,7 @@ class RerunLogger(NullLogger):
         if depth_every_n < 1:
             raise ValueError(f"expected depth_every_n >= 1, found {depth_every_n}")
         self._compress = compress
-        self._jpeg_quality = jpeg_quality
+        self._jpeg = jpeg_quality if compress else None  # None: raw colour
         self._depth_every_n = depth_every_n
         self._frame = 0
         self._rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
@@ -135,9 +135,9 @@ class RerunLogger(NullLogger):
         """
         if not self._calibrated:
             self.log_calibration(frame.color_intrinsics)
-        self._rec.log(layout.RGB, self._image(frame.color, "RGB"))
+        self._rec.log(layout.RGB, rerun_arrays.image(frame.color, "RGB", jpeg_quality=self._jpeg))
         if self._depth_due(keyframe):
-            self._rec.log(layout.DEPTH, self._depth(frame.depth_m))
+            self._rec.log(layout.DEPTH, rerun_arrays.depth(frame.depth_m, png=self._compress))
 
     def log_registered_depth(self, depth_m: FloatArray, *, keyframe: bool = False) -> None:
         """Log depth registered to the colour camera, in metres (drawn as a cloud in 3-D).
@@ -145,7 +145,7 @@ class RerunLogger(NullLogger):
         Logged on keyframes and every depth_every_n-th frame, as the raw depth.
         """
         if self._depth_due(keyframe):
-            self._rec.log(layout.DEPTH_REGISTERED, self._depth(depth_m))
+            self._rec.log(layout.DEPTH_REGISTERED, rerun_arrays.depth(depth_m, png=self._compress))
 
     def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
         """Log the camera pose of the current frame and mark keyframes on the trail."""
@@ -214,7 +214,7 @@ class RerunLogger(NullLogger):
         self._rec.log(layout.SEGMENTATION, rr.SegmentationImage(ids, opacity=0.5))
         if confidence is not None:
             grey = np.clip(np.asarray(confidence) * 255.0 + 0.5, 0.0, 255.0).astype(np.uint8)
-            self._rec.log(layout.CONFIDENCE, self._image(grey, "L"))
+            self._rec.log(layout.CONFIDENCE, rerun_arrays.image(grey, "L", jpeg_quality=self._jpeg))
 
     def log_timing(self, stage: str, seconds: float) -> None:
         """Log the time a stage took, in seconds."""
@@ -302,19 +302,6 @@ class RerunLogger(NullLogger):
     def _depth_due(self, keyframe: bool) -> bool:
         """Return whether the current frame's depth is logged: keyframes and every n-th frame."""
         return keyframe or self._frame % self._depth_every_n == 0
-
-    def _image(
-        self, pixels: npt.NDArray[np.uint8], model: Literal["RGB", "L"]
-    ) -> rr.Image | rr.EncodedImage:
-        """Return an image as JPEG, or raw when not compressing."""
-        image = rr.Image(pixels, color_model=model)
-        return image.compress(jpeg_quality=self._jpeg_quality) if self._compress else image
-
-    def _depth(self, depth_m: FloatArray) -> rr.DepthImage | rr.EncodedDepthImage:
-        """Return depth in millimetres as a lossless PNG, or raw when not compressing."""
-        if self._compress:
-            return rerun_arrays.depth_png(depth_m)
-        return rerun_arrays.depth_image(depth_m)
 
     def _style(self, path: str, style: rr.AsComponents) -> None:
         """Log a static style (series name, colour) for an entity once."""
