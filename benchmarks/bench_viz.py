@@ -39,7 +39,7 @@ TUM_K = Intrinsics(640, 480, 517.3, 516.5, 318.6, 255.3)
 N_FRAMES = 90
 KEYFRAME_EVERY = 4
 N_KEYPOINTS = 500
-DEFAULT: dict[str, Any] = {"compress": True, "jpeg_quality": 75, "depth_every_n": 30}
+DEFAULT: dict[str, Any] = {"compress": True, "jpeg_quality": 70, "depth_every_n": 30}
 FULL: dict[str, Any] = {"compress": False, "depth_every_n": 1}
 GOAL_KB = 100.0
 

@@ -23,7 +23,7 @@ STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
 class VizConfig:
     """What goes into recording.rrd: compact by default; full fidelity with compress = false.
 
-    By default (measured on TUM fr1_rpy, 640x480): colour of every frame as JPEG (~34 KB), depth
+    By default (measured on TUM fr1_rpy, 640x480): colour of every frame as JPEG (~30 KB), depth
     as lossless PNG (~95 KB) on keyframes and every depth_every_n-th frame (once a second at
     30 fps), segmentation on keyframes, poses and tracking every frame. Full fidelity
     (`compress = false`, `depth_every_n = 1`): raw colour and depth of every frame, ~1 MB a frame.
@@ -35,7 +35,7 @@ class VizConfig:
     depth_every_n: int = 30
     # Colour and confidence as JPEG, depth as lossless PNG; false: raw images.
     compress: bool = True
-    jpeg_quality: int = 75
+    jpeg_quality: int = 70
 
     def __post_init__(self) -> None:
         for name in ("images_every_n", "depth_every_n"):

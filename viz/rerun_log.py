@@ -54,7 +54,7 @@ class RerunLogger(NullLogger):
         application_id: str = layout.APPLICATION_ID,
         recording_name: str,
         compress: bool = True,
-        jpeg_quality: int = 75,
+        jpeg_quality: int = 70,
         depth_every_n: int = 30,
         live: LiveViewer | None = None,
     ) -> None:

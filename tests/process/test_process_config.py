@@ -99,7 +99,7 @@ def test_an_unknown_stage_lists_the_valid_ones() -> None:
 
 def test_viz_full_fidelity_options_reach_the_logger(tmp_path: Path) -> None:
     cfg = load_config(write(tmp_path, "[viz]\ncompress = false\ndepth_every_n = 1\n"))
-    assert cfg.viz.logger_options() == {"compress": False, "jpeg_quality": 75, "depth_every_n": 1}
+    assert cfg.viz.logger_options() == {"compress": False, "jpeg_quality": 70, "depth_every_n": 1}
 
 
 @pytest.mark.parametrize(
