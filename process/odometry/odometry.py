@@ -33,6 +33,7 @@ from process.odometry.features import FeatureExtractor, Keyframe
 from process.odometry.loop_closure import PoseGraph
 from process.odometry.state import TrackState
 from process.odometry.tracker import Tracker
+from process.odometry.undistort import Undistorter
 
 __all__ = ["Odometry", "OdometryConfig", "TrackResult"]
 
@@ -64,8 +65,10 @@ class Odometry:
     def __init__(self, cfg: OdometryConfig, *, intrinsics: Intrinsics) -> None:
         self.cfg = cfg
         self.intrinsics = intrinsics
+        self._undistort = Undistorter(intrinsics) if intrinsics.is_distorted else None
+        pinhole = self._undistort.pinhole if self._undistort else intrinsics
         extractor = FeatureExtractor(
-            intrinsics,
+            pinhole,
             n_features=cfg.n_features,
             scale_factor=cfg.orb_scale_factor,
             levels=cfg.orb_levels,
@@ -74,7 +77,7 @@ class Odometry:
             max_depth_m=cfg.max_depth_m,
         )
         dense = DenseAligner(
-            intrinsics,
+            pinhole,
             scale=cfg.dense_scale,
             max_depth_m=cfg.max_depth_m,
             iterations=cfg.dense_iterations,
@@ -99,13 +102,19 @@ class Odometry:
         """Estimate the pose of one frame from its colour and its depth in the colour camera."""
         t0 = time.perf_counter()
         gray = np.asarray(cv2.cvtColor(frame.color, cv2.COLOR_RGB2GRAY), np.uint8)
-        state: TrackState = self._tracker.step(gray, np.asarray(depth_m, np.float32), frame)
+        depth = np.asarray(depth_m, np.float32)
+        if self._undistort is not None:
+            gray, depth = self._undistort.gray(gray), self._undistort.depth(depth)
+        state: TrackState = self._tracker.step(gray, depth, frame)
         self._frames.append((frame.stamp_ns, state.keyframe_id, state.keyframe_from_camera))
         world = (
             self.graph.poses[state.keyframe_id] @ state.keyframe_from_camera
             if state.keyframe_id >= 0
             else np.eye(4)
         )
+        xy, matched = state.keypoints_xy, state.matched_keyframe_xy
+        if self._undistort is not None:  # the timeline draws on the raw image
+            xy, matched = self._undistort.to_distorted(xy), self._undistort.to_distorted(matched)
         return TrackResult(
             index=frame.index,
             stamp_ns=frame.stamp_ns,
@@ -114,9 +123,9 @@ class Odometry:
             keyframe_id=state.keyframe_id,
             status=state.status,
             n_inliers=state.n_inliers,
-            keypoints_xy=state.keypoints_xy,
+            keypoints_xy=xy,
             inlier_mask=state.inlier_mask,
-            matched_keyframe_xy=state.matched_keyframe_xy,
+            matched_keyframe_xy=matched,
             event=state.event,
             seconds=time.perf_counter() - t0,
             trajectory_corrected=state.trajectory_corrected,

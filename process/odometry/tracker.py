@@ -11,7 +11,7 @@ import numpy.typing as npt
 from capture.recording import RgbdFrame
 from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
-from process.odometry.keyframes import needs_keyframe, refine_densely
+from process.odometry.keyframes import FeatureCheck, needs_keyframe, refine_densely
 from process.odometry.locate import Located, Locator
 from process.odometry.loop_closure import Edge, LoopCloser, PoseGraph
 from process.odometry.pnp import information_from_points, rigid_inverse
@@ -150,7 +150,7 @@ class Tracker:
                 kf_from_camera, corrected = np.eye(4), bool(made)
                 events.append(made)
         elif self.cfg.dense_refine_all_frames and kf.dense is not None:
-            kf_from_camera = self._refine_frame(kf, kf_from_camera, image)
+            kf_from_camera = self._refine_frame(found, kf_from_camera, image)
         ref = self._ref
         assert ref is not None  # set above
         self._kf_from_camera = kf_from_camera
@@ -170,13 +170,26 @@ class Tracker:
         )
 
     def _refine_frame(
-        self, kf: Keyframe, kf_from_camera: npt.NDArray[np.float64], image: _Image
+        self, found: Located, kf_from_camera: npt.NDArray[np.float64], image: _Image
     ) -> npt.NDArray[np.float64]:
         """Return a non-keyframe's pose against kf, refined densely with the short schedule."""
         current = self.dense.prepare(image.gray, image.depth)
         return refine_densely(
-            self.dense, current, kf.dense, kf_from_camera, cfg=self.cfg, quick=True
+            self.dense,
+            current,
+            found.keyframe.dense,
+            kf_from_camera,
+            cfg=self.cfg,
+            quick=True,
+            check=self._check(found, image),
         )
+
+    def _check(self, found: Located, image: _Image) -> FeatureCheck:
+        """Return the PnP inliers of a located image, for checking dense corrections."""
+        inliers = found.pnp.inliers
+        normalised = self.extractor.normalised(image.xy[found.query[inliers]])
+        points = found.keyframe.points[found.train[inliers]]
+        return FeatureCheck(points, normalised, self.extractor.intrinsics.fx)
 
     # -- keyframes -----------------------------------------------------------------------------
     def _new_keyframe(
@@ -218,7 +231,12 @@ class Tracker:
         dense = self.dense.prepare(image.gray, image.depth) if self.cfg.dense_refine else None
         if dense is not None and parent.dense is not None:
             kf_from_camera = refine_densely(
-                self.dense, dense, parent.dense, kf_from_camera, cfg=self.cfg
+                self.dense,
+                dense,
+                parent.dense,
+                kf_from_camera,
+                cfg=self.cfg,
+                check=self._check(found, image),
             )
         kf = self._new_keyframe(
             image, world_from_keyframe=self.graph.poses[parent.id] @ kf_from_camera
