@@ -29,8 +29,9 @@ from benchmarks.common import Row
 from benchmarks.tum_odometry import tum_rows
 from capture.recording import Intrinsics, RecordingReader, RgbdFrame
 from process.depth import DepthConfig, DepthProcessor, register_depth
-from process.odometry.odometry import Odometry, OdometryConfig
-from process.trajectory import ate_rmse, path_length
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry
+from process.trajectory import Trajectory, ate_rmse, path_length
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 TUM_RPY = "tum_fr1_rpy"  # the whole sequence: a Kinect v1 turned fast by hand (README there)
@@ -62,7 +63,7 @@ def _ours(seq: Sequence) -> tuple[npt.NDArray[np.float64], float]:
         odometry.track(frame, depth)
     trajectory = odometry.finish()
     seconds = time.perf_counter() - t0 + seq.depth_s
-    return np.array([p for _, p in trajectory]), seconds
+    return trajectory.poses, seconds
 
 
 def _open3d(seq: Sequence) -> tuple[npt.NDArray[np.float64], float]:
@@ -165,8 +166,9 @@ def _odometry_rows(seq: Sequence, *, with_fps: bool) -> list[Row]:
     length = path_length(seq.gt)
     ours, ours_s = _ours(seq)
     ref, ref_s = _open3d(seq)
-    ate_ours = ate_rmse((seq.stamps, ours), (seq.stamps, seq.gt))
-    ate_ref = ate_rmse((seq.stamps, ref), (seq.stamps, seq.gt))
+    truth = Trajectory(seq.stamps, seq.gt)
+    ate_ours = ate_rmse(Trajectory(seq.stamps, ours), truth)
+    ate_ref = ate_rmse(Trajectory(seq.stamps, ref), truth)
     source = "Open3D frame-to-frame RGB-D odometry, same run"
     rows = [
         Row(

@@ -27,8 +27,9 @@ from capture.importers import _read_color, _read_depth_mm
 from capture.importers.tum import _load_tum
 from capture.recording import GroundTruth, RgbdFrame
 from process.depth import DepthConfig, DepthProcessor
-from process.odometry.odometry import Odometry, OdometryConfig
-from process.trajectory import ate_rmse, rpe
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry
+from process.trajectory import Trajectory, ate_rmse, rpe
 
 FPS_GOAL = ">= 30 frames/s"
 
@@ -52,12 +53,12 @@ class Run:
     @property
     def ate_m(self) -> float:
         """Return the ATE RMSE in metres."""
-        return ate_rmse((self.stamps, self.poses), (self.gt_stamps, self.gt))
+        return ate_rmse(Trajectory(self.stamps, self.poses), Trajectory(self.gt_stamps, self.gt))
 
     @property
     def rpe(self) -> tuple[float, float]:
         """Return the frame-to-frame RPE RMSE (metres, degrees)."""
-        return rpe((self.stamps, self.poses), (self.gt_stamps, self.gt))
+        return rpe(Trajectory(self.stamps, self.poses), Trajectory(self.gt_stamps, self.gt))
 
 
 def tum_frames(folder: Path, *, start: int = 0, count: int | None = None) -> Iterator[RgbdFrame]:
@@ -92,14 +93,14 @@ def run_odometry(frames: Iterator[RgbdFrame], cfg: OdometryConfig | None = None)
         if frame.ground_truth is not None and frame.ground_truth.world_from_camera is not None:
             gt_stamps.append(frame.stamp_ns)
             gt.append(frame.ground_truth.world_from_camera)
-        statuses.append(result.status)
-        inliers.append(result.n_inliers)
+        statuses.append(result.state.status)
+        inliers.append(result.state.n_inliers)
         is_kf.append(result.is_keyframe)
-        if result.event:
-            events.append(f"{frame.index}: {result.event}")
+        if result.state.event:
+            events.append(f"{frame.index}: {result.state.event}")
     assert odometry is not None, "no frames"
     t0 = time.perf_counter()
-    poses = np.array([p for _, p in odometry.finish()])
+    poses = odometry.finish().poses
     wall += time.perf_counter() - t0
     cpu = time.process_time() - cpu  # includes the bookkeeping here, a few percent
     return Run(

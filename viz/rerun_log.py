@@ -1,13 +1,14 @@
 """A `Logger` that writes an `.rrd` with our blueprint, one method per domain object.
 
-`RerunLogger` hands arrays to Rerun without Python loops; `make_logger` picks it or its
-do-nothing twin `NullLogger` (viz.logger).
+`RerunLogger` hands arrays to Rerun without Python loops; `viz.logger.NullLogger` is its
+do-nothing twin for `--no-viz`.
 """
 
 from __future__ import annotations
 
 import uuid
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
@@ -20,27 +21,27 @@ from viz import layout, rerun_arrays
 from viz.logger import (
     FloatArray,
     IntArray,
-    Logger,
     MapKind,
     NullLogger,
     RefineKind,
     TrajectoryKind,
 )
 
-__all__ = [
-    "FloatArray",
-    "IntArray",
-    "Logger",
-    "MapKind",
-    "NullLogger",
-    "RefineKind",
-    "RerunLogger",
-    "TrajectoryKind",
-    "make_logger",
-]
-
 _POINT_RADIUS: Final = rr.Radius.ui_points(1.5)
 _PALETTE: Final = layout.cluster_palette()
+
+
+@dataclass(frozen=True, slots=True)
+class LiveViewer:
+    """Stream the log to a viewer as it is written: spawn a native one, or serve on a port."""
+
+    spawn: bool = False
+    port: int = 9876
+
+    @property
+    def url(self) -> str:
+        """Return the address a viewer connects to: `rerun URL`, or the web viewer's ?url=."""
+        return f"rerun+http://127.0.0.1:{self.port}/proxy"
 
 
 class RerunLogger(NullLogger):
@@ -53,13 +54,20 @@ class RerunLogger(NullLogger):
         application_id: str = layout.APPLICATION_ID,
         recording_name: str,
         jpeg_quality: int = 90,
+        live: LiveViewer | None = None,
     ) -> None:
         if not 1 <= jpeg_quality <= 100:
             raise ValueError(f"expected jpeg_quality in 1..100, found {jpeg_quality}")
         self._jpeg_quality = jpeg_quality
         self._rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         self._rec.set_log_time_enabled(False)  # only our timelines: wall-clock time means nothing
-        self._rec.save(rrd_path, default_blueprint=layout.blueprint())
+        sinks: list[rr.FileSink | rr.GrpcSink | rr.GrpcServerSink] = [rr.FileSink(rrd_path)]
+        if live is not None and live.spawn:  # a native viewer of its own, fed over gRPC
+            rr.spawn(port=live.port, connect=False, recording=self._rec)
+            sinks.append(rr.GrpcSink(live.url))
+        elif live is not None:  # a gRPC server on this machine that viewers connect to
+            sinks.append(rr.GrpcServerSink(bind_ip="127.0.0.1", port=live.port))
+        self._rec.set_sinks(*sinks, default_blueprint=layout.blueprint())
         self._rec.send_recording_name(recording_name)
         self._rec.log("/", layout.annotation_context(), static=True)
         overlay = layout.annotation_context(unlabelled_alpha=0)  # see the image through label 0
@@ -276,10 +284,3 @@ class RerunLogger(NullLogger):
         """Send a whole curve as scalars over the `dbscan_k` timeline in one call."""
         index = rr.TimeColumn(layout.TIMELINE_DBSCAN_K, sequence=ks)
         self._rec.send_columns(path, indexes=[index], columns=rr.Scalars.columns(scalars=values))
-
-
-def make_logger(rrd_path: Path | None, *, recording_name: str) -> RerunLogger | NullLogger:
-    """Return a RerunLogger writing rrd_path, or a NullLogger when rrd_path is None."""
-    if rrd_path is None:
-        return NullLogger()
-    return RerunLogger(rrd_path, recording_name=recording_name)

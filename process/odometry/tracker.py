@@ -9,12 +9,14 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import RgbdFrame
+from process.geometry import rigid_inverse
 from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
 from process.odometry.keyframes import FeatureCheck, needs_keyframe, refine_densely
 from process.odometry.locate import Located, Locator
-from process.odometry.loop_closure import Edge, LoopCloser, PoseGraph
-from process.odometry.pnp import information_from_points, rigid_inverse
+from process.odometry.loop_closure import LoopCloser
+from process.odometry.pnp import information_from_points
+from process.odometry.pose_graph import Edge, PoseGraph
 from process.odometry.state import TrackState, match_arrays
 
 if TYPE_CHECKING:
@@ -48,14 +50,12 @@ class Tracker:
         *,
         extractor: FeatureExtractor,
         dense: DenseAligner,
-        graph: PoseGraph,
-        keyframes: list[Keyframe],
     ) -> None:
         self.cfg = cfg
         self.extractor = extractor
         self.dense = dense
-        self.graph = graph
-        self.keyframes = keyframes
+        self.graph = PoseGraph()  # keyframe poses relative to the first camera
+        self.keyframes: list[Keyframe] = []  # owned here; others read it
         self.locator = Locator(cfg, extractor=extractor)
         self._ref: Keyframe | None = None
         self._kf_from_camera = np.eye(4)
@@ -68,7 +68,7 @@ class Tracker:
         self._segment = 0
         self._dense_refused = 0  # dense corrections of frames refused in a row
         self._dense_pause = 0  # frames left without dense refinement
-        self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=graph, keyframes=keyframes)
+        self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=self.graph)
 
     def step(
         self, gray: npt.NDArray[np.uint8], depth: npt.NDArray[np.float32], frame: RgbdFrame
@@ -271,7 +271,7 @@ class Tracker:
         kf.dense = dense
         support = information_from_points(parent.points[found.train[found.pnp.inliers]])
         self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, support, False))
-        return self.loops.close(kf)
+        return self.loops.close(kf, self.keyframes)
 
     def _initialise(self, image: _Image) -> TrackState:
         kf = self._new_keyframe(image, world_from_keyframe=np.eye(4))
