@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -128,7 +129,7 @@ def refine(
     regrown, r2 = np.zeros(0, np.intp), {}
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
-        grown = regrow(points, labels, clusters, r1_m=r1)
+        grown = regrow(points, labels, clusters, r1_m=r1, gap_m=cfg.object_gap_m)
         labels_iii[objects], clusters_iii[objects] = grown.labels, grown.clusters
         regrown, r2 = objects[grown.regrown], grown.r2_m
     lap("regrowth")
@@ -155,7 +156,8 @@ def _correct(
         members = np.flatnonzero(labels == label)
         entry, cluster_of = _cluster_class(label, points[members], cfg, shared)
         sizes = np.bincount(cluster_of[cluster_of >= 0], minlength=1)
-        big = np.flatnonzero(sizes >= cfg.min_cluster_points)
+        min_size = cfg.min_cluster_points if entry.choice is None else entry.choice.min_size
+        big = np.flatnonzero(sizes >= min_size)
         new_id = np.zeros(len(sizes) + 1, np.int32)  # index 0 takes noise (-1)
         new_id[big + 1] = np.arange(next_id, next_id + len(big))
         ids = new_id[cluster_of + 1]
@@ -176,9 +178,7 @@ def _cluster_class(
         return entry, noise  # no cluster of this class can reach the size threshold
     t0 = time.perf_counter()
     if shared is None:
-        table, curves, choice = estimate_parameters(
-            points, k_max=cfg.k_max, full_curves=cfg.full_curves
-        )
+        table, curves, choice = estimate_parameters(points, **_rule(cfg))
         t1 = time.perf_counter()
         cluster_of = table.labels(choice.k - 1, choice.min_pts)
         seconds = time.perf_counter() - t1
@@ -202,5 +202,17 @@ def _shared_estimate(
     t0 = time.perf_counter()
     if len(labelled) < 2:
         return ClassClustering(0, len(labelled), None, None, 0, 0, 0.0, 0.0)
-    _, curves, choice = estimate_parameters(labelled, k_max=cfg.k_max, full_curves=cfg.full_curves)
+    _, curves, choice = estimate_parameters(labelled, **_rule(cfg))
     return ClassClustering(0, len(labelled), curves, choice, 0, 0, time.perf_counter() - t0, 0.0)
+
+
+def _rule(cfg: RefineConfig) -> dict[str, Any]:
+    """Return estimate_parameters' keyword arguments from the configuration."""
+    return {
+        "k_max": cfg.k_max,
+        "full_curves": cfg.full_curves,
+        "rule": cfg.dbscan_rule,
+        "min_size": cfg.min_cluster_points,
+        "min_area_m2": cfg.min_cluster_area_m2,
+        "tolerance": cfg.plateau_tolerance,
+    }

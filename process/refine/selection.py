@@ -1,0 +1,70 @@
+"""How adaptive DBSCAN picks K from its cluster-count curve: the paper's rule and a plateau.
+
+`literal` is PAPER.md's reading of KANN-DBSCAN: the first run of >= 3 equal cluster counts,
+every cluster counted. On real-looking clouds (label bleed, wrong-class specks, missed
+patches) that count moves by one or two at almost every K, because each speck is a cluster
+of its own; the first "run" is then a coincidence, or there is none (issue 12).
+
+`plateau` counts only the clusters that survive the size threshold (the objects the step
+keeps) and looks for the longest window of K over which that count varies by no more than a
+tolerance; it chooses the window's largest K, the paper's "minimum density threshold" of the
+stable interval. Neither rule falls back silently: the note says what was chosen and why.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+STABLE_RUN = 3  # KANN-DBSCAN: the cluster count is stable when 3 consecutive K agree
+RULES = ("literal", "plateau")
+
+
+def plateau_tolerance(count: int, relative: float) -> int:
+    """Return how far a count may move inside a plateau: `relative` of it, at least 0."""
+    return int(np.floor(relative * count + 1e-9))
+
+
+def plateau_choice(
+    n_big: npt.NDArray[np.int64], *, relative: float, min_run: int = STABLE_RUN
+) -> tuple[int, bool, str]:
+    """Return (index of the chosen K, plateau found?, note) from the counts of large clusters.
+
+    A plateau is a window of consecutive K (all evaluated, >= 0) whose large-cluster counts
+    are >= 1 and lie within `plateau_tolerance(min count, relative)` of each other. The
+    longest window wins (the later one on ties) and its largest K is chosen. Without a window
+    of `min_run` K: the largest K that gives a large cluster, said so in the note.
+    """
+    values = [int(v) for v in n_big]
+    if -1 in values:
+        values = values[: values.index(-1)]
+    best: tuple[int, int] | None = None  # (start, end)
+    for start in range(len(values)):
+        low = high = values[start]
+        if low < 1:
+            continue
+        end = start
+        while end + 1 < len(values):
+            v = values[end + 1]
+            lo, hi = min(low, v), max(high, v)
+            if v < 1 or hi - lo > plateau_tolerance(lo, relative):
+                break
+            low, high, end = lo, hi, end + 1
+        if best is None or end - start >= best[1] - best[0]:
+            best = (start, end)
+    if best is not None and best[1] - best[0] + 1 >= min_run:
+        start, end = best
+        window = values[start : end + 1]
+        counts = f"{min(window)}" if min(window) == max(window) else f"{min(window)}-{max(window)}"
+        return end, True, f"plateau K={start + 1}..{end + 1}: {counts} clusters above the size"
+    positive = [i for i, v in enumerate(values) if v > 0]
+    if not positive:
+        last = max(len(values) - 1, 0)
+        return last, False, f"no plateau: no K in 1..{len(values)} gives a cluster above the size; chose K={last + 1}"
+    longest = 0 if best is None else best[1] - best[0] + 1
+    return (
+        positive[-1],
+        False,
+        f"no plateau: the count of clusters above the size holds for {longest} K at most "
+        f"(need {min_run}); chose the largest K with one, K={positive[-1] + 1}",
+    )
