@@ -178,10 +178,14 @@ def _classify(
     cfg: RefineConfig,
     min_points: int,
 ) -> Plane:
-    """Classify a plane: level and lowest = floor, level and highest = ceiling, upright = wall.
+    """Classify a plane by its orientation and position along `up`, not by its size.
 
-    Only the plane's large connected pieces count: RANSAC's infinite plane also takes the
-    coplanar faces of furniture far from the wall or floor, which must stay objects.
+    Floor: level, at the bottom of the cloud, with the room rising `wall_min_height_m` above
+    it. Ceiling: level, at the top, that far above the bottom. Wall: upright, rising that high
+    above the bottom. A table top seen from above is level and at the bottom of a table scene,
+    but nothing rises a room's height above it: it stays an object. Only the plane's large
+    connected pieces count: RANSAC's infinite plane also takes the coplanar faces of furniture
+    far from the wall or floor, which must stay objects.
     """
     none = np.zeros(0, np.intp)
     if up is None or heights is None:
@@ -196,9 +200,10 @@ def _classify(
     height = float(heights[kept].mean())
     low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
     label = 0
-    if level and height - low <= cfg.structure_height_tol_m:
+    room = cfg.wall_min_height_m
+    if level and height - low <= cfg.structure_height_tol_m and high - height >= room:
         label = FLOOR
-    elif level and high - height <= cfg.structure_height_tol_m:
+    elif level and high - height <= cfg.structure_height_tol_m and height - low >= room:
         label = CEILING
     elif upright and float(np.percentile(heights[kept], 99.0)) - low >= cfg.wall_min_height_m:
         label = WALL  # upright and rising well above the floor: chair backs and desk sides do not

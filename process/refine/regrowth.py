@@ -21,6 +21,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, nearest first
+_FLOOR_PERCENTILE = 0.5  # the floor under the objects: this low a percentile of their heights
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,7 @@ def regrow(
     *,
     r1_m: dict[int, float],
     gap_m: float = 0.0,
+    up: npt.NDArray[np.float64] | None = None,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -51,12 +53,20 @@ def regrow(
         clusters: (N,) cluster id per point, 0 = none; every cluster has one class.
         r1_m: class label -> r1 (the class's chosen eps).
         gap_m: clusters of one class whose boxes come this close are one object.
+        up: gravity-up; boxes are then taken in a frame with z up, and each object's box
+            reaches down to the floor (the lowest points): furniture stands on legs, bases
+            and stems that a segmentation misses first.
     """
     labels, clusters = labels.copy(), clusters.copy()
+    if up is not None:
+        points = (points.astype(np.float64) @ _frame(up).T).astype(np.float32)
     ids = np.unique(clusters[clusters > 0])
     if len(ids) == 0:
         return Regrowth(labels, clusters, np.zeros(0, np.intp), {}, {}, 0)
     table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m)
+    if up is not None and len(points):
+        floor = float(np.percentile(points[:, 2], _FLOOR_PERCENTILE))
+        table.low[:, 2] = np.minimum(table.low[:, 2], floor)
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
     frontier = np.flatnonzero(clusters > 0)
     open_ = np.flatnonzero(labels == 0)
@@ -112,6 +122,14 @@ def _cluster_table(
     r1 = np.array([r1_m.get(int(c), 0.0) for c in label])
     r2 = np.linalg.norm(o_high - o_low, axis=1)[obj] / 2
     return _Clusters(label, obj, o_low[obj] - r1[:, None], o_high[obj] + r1[:, None], r1, r2)
+
+
+def _frame(up: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Return a rotation whose third row is the unit `up` (points @ R.T have z along up)."""
+    z = np.asarray(up, np.float64) / np.linalg.norm(up)
+    x = np.cross([0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z])
 
 
 def _objects(
