@@ -91,6 +91,7 @@ def refinement_metrics(
     up = result.planes.up
     section["up"] = None if up is None else [float(v) for v in up]
     section["up_source"] = result.planes.up_source
+    section["plane_min_points"] = result.planes.min_points
     section["planes"] = [
         {
             "label": LABEL_NAMES[p.label] if p.label else "none",
@@ -121,6 +122,8 @@ def _clustering(entry: ClassClustering) -> dict[str, Any]:
         "eps_m": None if choice is None else choice.eps_m,
         "min_pts": None if choice is None else choice.min_pts,
         "stable": None if choice is None else choice.stable,
+        "rule": None if choice is None else choice.rule,
+        "min_cluster_points": None if choice is None else choice.min_size,
         "note": "fewer points than min_cluster_points" if choice is None else choice.note,
         "points": entry.points,
         "clusters": entry.clusters,

@@ -101,7 +101,9 @@ def sim_scene(
     scale = width / 320
     for pose in poses:
         view = renderer.render_color(pose, intrinsics=k)
-        pred = _degrade(view.labels, view.instances, view.depth_m, pose, k, anchors, err, scale, rng)
+        pred = _degrade(
+            view.labels, view.instances, view.depth_m, pose, k, anchors, err, scale, rng
+        )
         noisy = view.depth_m * (1 + err.depth_noise * rng.standard_normal(view.depth_m.shape))
         _vote(votes, points, pose, k, pred, noisy.astype(np.float32))
     seen = votes.sum(axis=1) > 0
@@ -154,10 +156,10 @@ def _anchors(
     n_holes = rng.poisson(area * err.holes_per_m2)
     n_wrong = rng.poisson(area * err.wrong_per_m2)
     seeds = rng.choice(objects, n_holes + n_wrong)
-    radius = np.r_[rng.uniform(*err.hole_radius_m, n_holes), rng.uniform(*err.wrong_radius_m, n_wrong)]
-    wrong = np.array(
-        [_other(int(labels[s]), rng) for s in seeds[n_holes:]], np.uint8
-    ).reshape(-1)
+    radius = np.r_[
+        rng.uniform(*err.hole_radius_m, n_holes), rng.uniform(*err.wrong_radius_m, n_wrong)
+    ]
+    wrong = np.array([_other(int(labels[s]), rng) for s in seeds[n_holes:]], np.uint8).reshape(-1)
     ids = [int(i) for i in np.unique(instances[objects])]
     drop = {i: float(err.drop_max * rng.beta(1.0, 3.0)) for i in ids}
     erode = {i: int(rng.integers(-err.erode_px // 2, err.erode_px + 1)) for i in ids}
@@ -209,7 +211,9 @@ def _degrade(
     for _ in range(rng.poisson(err.blobs_per_view)):  # random wrong-class blobs
         centre = (int(rng.integers(labels.shape[1])), int(rng.integers(labels.shape[0])))
         axes = tuple(int(v) for v in rng.integers(3, 12, 2) * scale)
-        cv2.ellipse(out, centre, axes, float(rng.uniform(0, 180)), 0, 360, int(rng.integers(4, 11)), -1)
+        cv2.ellipse(
+            out, centre, axes, float(rng.uniform(0, 180)), 0, 360, int(rng.integers(4, 11)), -1
+        )
     return out
 
 

@@ -74,7 +74,8 @@ class RefineConfig:
             )
         if self.dbscan_rule not in RULES:
             raise ConfigError(
-                f"refinement.dbscan_rule must be one of {', '.join(RULES)}, got {self.dbscan_rule!r}"
+                f"refinement.dbscan_rule must be one of {', '.join(RULES)}, "
+                f"got {self.dbscan_rule!r}"
             )
         if not 0.0 <= self.plateau_tolerance <= 1.0:
             raise ConfigError(

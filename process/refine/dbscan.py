@@ -24,9 +24,9 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-logger = logging.getLogger(__name__)
-
 from process.refine.selection import STABLE_RUN, plateau_choice
+
+logger = logging.getLogger(__name__)
 
 MIN_PTS_FLOOR = 4  # the paper: MinPts >= 4 for 3-D points
 

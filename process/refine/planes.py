@@ -73,9 +73,7 @@ def segment_planes(
         remaining = np.delete(remaining, inliers)
     up_used, source = _gravity(points, found, up, cfg)
     heights = None if up_used is None else points @ up_used.astype(np.float32)
-    planes = tuple(
-        _classify(points, m, idx, heights, up_used, cfg, min_points) for m, idx in found
-    )
+    planes = tuple(_classify(points, m, idx, heights, up_used, cfg, min_points) for m, idx in found)
     labels = np.zeros(len(points), np.uint8)
     for plane in planes:
         labels[plane.removed] = plane.label
@@ -86,11 +84,12 @@ def segment_planes(
 def min_plane_points(
     points: npt.NDArray[np.float32], cfg: RefineConfig, rng: np.random.Generator
 ) -> tuple[int, float]:
-    """Return (Min, surface density per m^2): the configured Min, else the smaller of
-    `plane_min_area_m2` at the cloud's density and `plane_min_share` of its points (>= 3).
+    """Return (Min, surface density per m^2): the configured Min, else one relative to the cloud.
 
-    The density is the mean count of points within 5 cm of 2,000 random points over the disc
-    of 5 cm: a voxel map at 2 cm gives ~2,500 per m^2, so a floor needs 1 m^2 of it seen.
+    The relative Min is the smaller of `plane_min_area_m2` at the cloud's density and
+    `plane_min_share` of its points, at least 3. The density is the mean count of points
+    within 5 cm of 2,000 random points over the disc of 5 cm: a voxel map at 2 cm gives
+    ~2,500 per m^2, so a floor needs 1 m^2 of it seen.
     """
     if len(points) < 3:
         return max(cfg.plane_min_points, 3), math.nan

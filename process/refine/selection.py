@@ -60,7 +60,12 @@ def plateau_choice(
     positive = [i for i, v in enumerate(values) if v > 0]
     if not positive:
         last = max(len(values) - 1, 0)
-        return last, False, f"no plateau: no K in 1..{len(values)} gives a cluster above the size; chose K={last + 1}"
+        return (
+            last,
+            False,
+            f"no plateau: no K in 1..{len(values)} gives a cluster above the size; "
+            f"chose K={last + 1}",
+        )
     longest = 0 if best is None else best[1] - best[0] + 1
     return (
         positive[-1],

@@ -129,9 +129,7 @@ def refine(
     regrown, r2 = np.zeros(0, np.intp), {}
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
-        grown = regrow(
-            points, labels, clusters, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up
-        )
+        grown = regrow(points, labels, clusters, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up)
         labels_iii[objects], clusters_iii[objects] = grown.labels, grown.clusters
         regrown, r2 = objects[grown.regrown], grown.r2_m
     lap("regrowth")

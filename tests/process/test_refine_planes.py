@@ -121,7 +121,9 @@ def test_a_table_top_at_the_bottom_of_a_table_scene_is_no_floor() -> None:
     assert (seg.labels == 0).all()
     camera_up = np.array([0.0, -1.0, 0.0])  # the same scene in a camera frame, tilted 30 degrees
     tilt = np.radians(30)
-    rotation = np.array([[1, 0, 0], [0, -np.sin(tilt), -np.cos(tilt)], [0, np.cos(tilt), -np.sin(tilt)]])
+    rotation = np.array(
+        [[1, 0, 0], [0, -np.sin(tilt), -np.cos(tilt)], [0, np.cos(tilt), -np.sin(tilt)]]
+    )
     camera = (np.concatenate([top, mug]) @ rotation.T).astype(np.float32)
     seg = segment_planes(camera, RefineConfig(), up=camera_up)
     assert seg.up_source == "argument snapped to plane"

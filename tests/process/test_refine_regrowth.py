@@ -1,4 +1,4 @@
-"""Regrowth: holes refill inside an object's box, nothing grows outside it; ties go to the nearer."""
+"""Regrowth: holes refill inside an object's box, nothing grows outside it, ties go nearer."""
 
 from __future__ import annotations
 
