@@ -89,7 +89,8 @@ def _run(
     from process import outputs
     from process.config import load_config, resolve_stages
     from process.pipeline import ReplayPipeline
-    from viz.rerun_log import NullLogger, RerunLogger
+    from viz.logger import NullLogger
+    from viz.rerun_log import RerunLogger
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)
@@ -147,7 +148,7 @@ def refine(
 
         from process import outputs
         from process.config import load_config, to_toml
-        from process.refine_job import refine_file
+        from process.refine.job import refine_file
 
         cfg = load_config(config)
         out.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ from helpers_refine_sim import SimScene, sim_scene
 from process.cloud import ply_bytes
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
-from process.refine_job import refine_and_log
+from process.refine.job import refine_and_log
 
 
 @pytest.fixture(scope="module")
