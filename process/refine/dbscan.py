@@ -2,7 +2,9 @@
 
 eps_K is the mean distance to the K-th nearest neighbour (KANN), MinPts_K the mean number of
 points within eps_K (the point itself included, never below 4); DBSCAN runs for K = 1, 2, ...
-and the largest K of the first run of >= 3 equal cluster counts is chosen.
+and K is chosen from the cluster counts by a rule of selection.py: PAPER.md's literal one (the
+largest K of the first run of >= 3 equal counts) or, by default, a plateau of the count of
+clusters above the size threshold.
 
 DBSCAN is our own, on SciPy's cKDTree, rather than Open3D's `cluster_dbscan`: Open3D searches
 the neighbourhoods again on every call, while here one query of 2 K_max + 1 neighbours per point
@@ -24,7 +26,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from process.refine.selection import STABLE_RUN, plateau_choice
+from process.refine.selection import plateau_choice, stable_choice, stable_run_closed
 
 logger = logging.getLogger(__name__)
 
@@ -185,51 +187,6 @@ class NeighbourTable:
                 out[i] = out[found[np.argmin(gaps)]]
 
 
-def stable_choice(n_clusters: npt.NDArray[np.int64]) -> tuple[int, bool, str]:
-    """Return (index of the chosen K, stable?, note) from the cluster counts of K = 1, 2, ...
-
-    The first run of >= 3 equal, non-zero counts is the stable interval and its largest K is
-    chosen. Fallback when there is none: the largest K of the longest run of non-zero counts
-    (the later run on ties); when no K gives a cluster, the largest K.
-    """
-    runs = _runs(n_clusters)
-    for start, end, value in runs:
-        if value > 0 and end - start + 1 >= STABLE_RUN:
-            return end, True, f"stable: {value} clusters for K={start + 1}..{end + 1}"
-    positive = [r for r in runs if r[2] > 0]
-    if not positive:
-        last = len(n_clusters) - 1
-        return last, False, f"fallback: no K in 1..{last + 1} gives a cluster; chose K={last + 1}"
-    start, end, value = max(positive, key=lambda r: (r[1] - r[0], r[0]))
-    return (
-        end,
-        False,
-        (
-            f"fallback: no {STABLE_RUN} equal cluster counts in K=1..{len(n_clusters)}; chose the "
-            f"largest K of the longest run ({value} clusters for K={start + 1}..{end + 1})"
-        ),
-    )
-
-
-def _runs(values: npt.NDArray[np.int64]) -> list[tuple[int, int, int]]:
-    """Return (first index, last index, value) of each run of equal consecutive values >= 0."""
-    runs: list[tuple[int, int, int]] = []
-    for i, v in enumerate(int(x) for x in values):
-        if v < 0:
-            break
-        if runs and runs[-1][2] == v:
-            runs[-1] = (runs[-1][0], i, v)
-        else:
-            runs.append((i, i, v))
-    return runs
-
-
-def _stable_run_closed(n_clusters: npt.NDArray[np.int64]) -> bool:
-    """Return whether the counts so far hold a stable run followed by a different count."""
-    runs = _runs(n_clusters)
-    return any(v > 0 and e - s + 1 >= STABLE_RUN for s, e, v in runs[:-1])
-
-
 def estimate_parameters(
     points: npt.NDArray[np.floating],
     *,
@@ -263,7 +220,7 @@ def estimate_parameters(
         count, components, core = table.cluster(k, int(min_pts[k]))
         n_clusters[k] = count
         n_big[k] = int((np.bincount(components[core]) >= min_size).sum()) if core.any() else 0
-        if rule == "literal" and not full_curves and _stable_run_closed(n_clusters[: k + 1]):
+        if rule == "literal" and not full_curves and stable_run_closed(n_clusters[: k + 1]):
             break
     if rule == "plateau":
         index, stable, note = plateau_choice(n_big, relative=tolerance)

@@ -73,3 +73,48 @@ def plateau_choice(
         f"no plateau: the count of clusters above the size holds for {longest} K at most "
         f"(need {min_run}); chose the largest K with one, K={positive[-1] + 1}",
     )
+
+
+def stable_choice(n_clusters: npt.NDArray[np.int64]) -> tuple[int, bool, str]:
+    """Return (index of the chosen K, stable?, note) from the cluster counts of K = 1, 2, ...
+
+    The first run of >= 3 equal, non-zero counts is the stable interval and its largest K is
+    chosen. Fallback when there is none: the largest K of the longest run of non-zero counts
+    (the later run on ties); when no K gives a cluster, the largest K.
+    """
+    runs = _runs(n_clusters)
+    for start, end, value in runs:
+        if value > 0 and end - start + 1 >= STABLE_RUN:
+            return end, True, f"stable: {value} clusters for K={start + 1}..{end + 1}"
+    positive = [r for r in runs if r[2] > 0]
+    if not positive:
+        last = len(n_clusters) - 1
+        return last, False, f"fallback: no K in 1..{last + 1} gives a cluster; chose K={last + 1}"
+    start, end, value = max(positive, key=lambda r: (r[1] - r[0], r[0]))
+    return (
+        end,
+        False,
+        (
+            f"fallback: no {STABLE_RUN} equal cluster counts in K=1..{len(n_clusters)}; chose the "
+            f"largest K of the longest run ({value} clusters for K={start + 1}..{end + 1})"
+        ),
+    )
+
+
+def _runs(values: npt.NDArray[np.int64]) -> list[tuple[int, int, int]]:
+    """Return (first index, last index, value) of each run of equal consecutive values >= 0."""
+    runs: list[tuple[int, int, int]] = []
+    for i, v in enumerate(int(x) for x in values):
+        if v < 0:
+            break
+        if runs and runs[-1][2] == v:
+            runs[-1] = (runs[-1][0], i, v)
+        else:
+            runs.append((i, i, v))
+    return runs
+
+
+def stable_run_closed(n_clusters: npt.NDArray[np.int64]) -> bool:
+    """Return whether the counts so far hold a stable run followed by a different count."""
+    runs = _runs(n_clusters)
+    return any(v > 0 and e - s + 1 >= STABLE_RUN for s, e, v in runs[:-1])
