@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers_refine import grid_patch
+from helpers_refine import grid_patch, labelled
 
+from process.refine import RefineConfig, refine
 from process.refine.dbscan import estimate_parameters
 from process.refine.selection import plateau_choice
+from process.refine.steps import voxel_cells
 
 
 def _objects_with_specks(seed: int, n_objects: int) -> np.ndarray:
@@ -61,3 +63,30 @@ def test_the_longest_plateau_wins_and_ties_go_to_the_later_one() -> None:
     counts = np.array([8, 8, 8, 5, 5, 5, 5, 2, 2, 2, 2])
     assert plateau_choice(counts, relative=0.0)[0] == 10
     assert plateau_choice(counts[:7], relative=0.0)[0] == 6
+
+
+def test_voxel_cells_are_voxel_centroids_and_map_every_point() -> None:
+    points = np.array([[0.01, 0.01, 0.0], [0.02, 0.02, 0.0], [0.05, 0.0, 0.0]], np.float32)
+    cells, cell_of = voxel_cells(points, 0.03)
+    assert len(cells) == 2 and cell_of[0] == cell_of[1] != cell_of[2]
+    np.testing.assert_allclose(cells[cell_of[0]], [0.015, 0.015, 0.0], atol=1e-7)
+    same, index = voxel_cells(points, 0.0)
+    assert same is points and list(index) == [0, 1, 2]
+
+
+@pytest.mark.parametrize("step", [0.005, 0.015])
+def test_missed_stripes_come_back_and_eps_is_the_same_in_metres_at_any_density(
+    step: float,
+) -> None:
+    rng = np.random.default_rng(2)
+    tops = [grid_patch((x0, x0 + 0.6), (0.0, 0.4), z=0.75, step=step) for x0 in (0.0, 1.0)]
+    points = np.concatenate(tops) + rng.normal(0.0, 0.001, (sum(map(len, tops)), 3))
+    stripe = np.abs(points[:, 0] % 1.0 - 0.3) < 0.02  # a 4 cm band missed across each top
+    cloud = labelled(points, np.where(stripe, 0, 4))
+    cfg = RefineConfig(plane_min_points=10**6)  # no planes: only clustering and regrowth
+    result = refine(cloud, cfg, up=np.array([0.0, 0.0, 1.0]))
+    choice = result.dbscan[4].choice
+    assert choice is not None and choice.stable
+    assert 0.06 <= choice.eps_m <= 0.09  # K = 1..30 over 3 cm cells, whatever the spacing
+    assert (result.labels_iii[result.kept] == 4).all()  # the stripes are regrown (SOR aside)
+    assert len(np.unique(result.clusters_iii)) >= 2
