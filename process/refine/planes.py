@@ -181,7 +181,7 @@ def _classify(
 
     Floor: level, at the bottom of the cloud, with the room rising `wall_min_height_m` above
     it. Ceiling: level, at the top, that far above the bottom. Wall: upright, rising that high
-    above the bottom. A table top seen from above is level and at the bottom of a table scene,
+    above the bottom and spanning half of it itself. A table top seen from above is level and at the bottom of a table scene,
     but nothing rises a room's height above it: it stays an object. Only the plane's large
     connected pieces count: RANSAC's infinite plane also takes the coplanar faces of furniture
     far from the wall or floor, which must stay objects.
@@ -204,11 +204,19 @@ def _classify(
         label = Label.FLOOR
     elif level and high - height <= cfg.structure_height_tol_m and height - low >= room:
         label = Label.CEILING
-    elif upright and float(np.percentile(heights[kept], 99.0)) - low >= cfg.wall_min_height_m:
-        label = (
-            Label.WALL
-        )  # upright and rising well above the floor: chair backs and desk sides do not
+    elif upright and _is_wall(heights[kept], low, cfg.wall_min_height_m):
+        label = Label.WALL
     return Plane(model, indices, label, kept if label else none, height)
+
+
+def _is_wall(heights: npt.NDArray[np.float32], low: float, room_m: float) -> bool:
+    """Return whether an upright plane rises `room_m` above the floor and spans half of it.
+
+    Chair backs and desk sides do not rise so high; a television or a whiteboard on a wall
+    rises high but spans well under a metre, and stays an object.
+    """
+    bottom, top = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
+    return top - low >= room_m and top - bottom >= room_m / 2
 
 
 def _large_pieces(

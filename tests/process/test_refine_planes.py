@@ -129,3 +129,13 @@ def test_a_table_top_at_the_bottom_of_a_table_scene_is_no_floor() -> None:
     seg = segment_planes(camera, RefineConfig(), up=camera_up)
     assert seg.up_source == "argument snapped to plane"
     assert (seg.labels == 0).all()
+
+
+def test_a_screen_high_on_a_stand_is_upright_and_high_but_no_wall() -> None:
+    points, parts = _room()
+    screen = grid_patch((0.5, 1.7), (1.7, 2.3), step=0.01)[:, [0, 2, 1]]  # 1.2 x 0.6 m, upright
+    screen[:, 1] = 1.0  # 1.2-1.8 m above the floor (z = 0.5)
+    seg = segment_planes(np.concatenate([points, screen]), CFG, up=UP)
+    assert any(len(p.indices) >= len(screen) for p in seg.planes)  # found as a plane
+    assert (seg.labels[len(points) :] == 0).all()
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()
