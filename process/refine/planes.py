@@ -181,8 +181,9 @@ def _classify(
 
     Floor: level, at the bottom of the cloud, with the room rising `wall_min_height_m` above
     it. Ceiling: level, at the top, that far above the bottom. Wall: upright, rising that high
-    above the bottom and spanning half of it itself. A table top seen from above is level and at the bottom of a table scene,
-    but nothing rises a room's height above it: it stays an object. Only the plane's large
+    above the bottom and spanning half of it itself. A table top seen from above is level and
+    at the bottom of a table scene, but nothing rises a room's height above it: it stays an
+    object. Only the plane's large
     connected pieces count: RANSAC's infinite plane also takes the coplanar faces of furniture
     far from the wall or floor, which must stay objects.
     """
