@@ -35,7 +35,7 @@ class RefineConfig:
     k_max: int = 30  # largest K of the KANN eps_K candidates
     cluster_voxel_m: float = 0.03  # DBSCAN runs on the centroids of voxels this size; 0 = points
     dbscan_rule: str = "plateau"  # K choice: "plateau" (selection.py) or "literal" (PAPER.md)
-    plateau_tolerance: float = 0.1  # "plateau": large-cluster counts may vary by this share
+    plateau_tolerance: float = 0.25  # "plateau": large-cluster counts may vary by this share
     min_cluster_points: int = 30  # clusters smaller than this go back to label 0 ...
     min_cluster_area_m2: float = 0.01  # ... or smaller than this surface at the class's density
     full_curves: bool = False  # run DBSCAN for every K, not only until the stable run ends

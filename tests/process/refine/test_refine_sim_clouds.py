@@ -35,8 +35,8 @@ def test_phase_iii_beats_phase_i_on_a_cloud_it_was_not_tuned_on(room: SimScene) 
         for p, c in result.phase_clouds().items()
     }
     assert f1["I"] < 0.8
-    assert f1["III"] >= f1["I"] + 0.1
-    assert f1["III"] >= 0.8
+    assert f1["III"] >= f1["I"] + 0.2  # measured 0.61 -> 0.86
+    assert f1["III"] >= 0.83
     assert {p.label for p in result.planes.planes} >= {2, 3}  # the camera never sees the ceiling
 
 
