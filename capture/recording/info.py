@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from capture.errors import RecordingError
-from capture.recording.index import TopicInfo, read_index
+from capture.recording.index import McapIndex, TopicInfo, damage_note, open_index
 from capture.recording.reader import RecordingReader
 
 
@@ -25,6 +25,7 @@ class RecordingInfo:
     device: dict[str, str] = field(default_factory=dict)
     capture: dict[str, str] = field(default_factory=dict)
     attachments: list[str] = field(default_factory=list)
+    damage: str = ""  # what was lost, one line ("" when intact)
 
     @property
     def drops(self) -> dict[str, int] | None:
@@ -37,19 +38,22 @@ class RecordingInfo:
 
 
 def describe(path: Path) -> RecordingInfo:
-    """Return the summary of a recording (finished or recovered, RGB-D or not)."""
+    """Return the summary of a recording (finished, recovered or damaged; RGB-D or not).
+
+    The frame count is what `process run` replays: for an intact finished recording the colour
+    frames that pair with depth are counted from the intact data; for an unfinished or damaged
+    one the frames are replayed (decoded), so that both commands give the same number.
+    """
     path = Path(path)
-    try:
-        with path.open("rb") as stream:
-            index = read_index(stream, path)
-    except OSError as err:
-        raise RecordingError(f"cannot open recording: {err.strerror}: {path}") from err
+    index, salvage = open_index(path)
+    salvage.close()
     frames: int | None = None
     aligned: bool | None = None
     reason = ""
     try:
         with RecordingReader(path) as rec:
-            frames, aligned = len(rec), rec.aligned
+            aligned = rec.aligned
+            frames = _count_frames(rec, index)
     except RecordingError as err:
         reason = str(err)
     return RecordingInfo(
@@ -63,7 +67,15 @@ def describe(path: Path) -> RecordingInfo:
         device=index.metadata.get("device", {}),
         capture=index.metadata.get("capture", {}),
         attachments=list(index.attachments),
+        damage=damage_note(index, path),
     )
+
+
+def _count_frames(rec: RecordingReader, index: McapIndex) -> int:
+    """Return the frames a run replays (a replay when the file is damaged or unfinished)."""
+    if index.finished and not index.damage.any and not index.duplicates:
+        return len(rec)
+    return sum(1 for _ in rec.frames())
 
 
 def format_info(info: RecordingInfo) -> str:
@@ -84,6 +96,7 @@ def format_info(info: RecordingInfo) -> str:
         if drops is not None
         else "unknown (no end-of-capture record)"
     )
+    damage = info.damage.rsplit(": ", 1)[0].removeprefix("recording is damaged: ")
     device = " ".join(f"{k}={v}" for k, v in info.device.items() if v) or "unknown"
     lines = [
         f"recording  {info.path}",
@@ -91,6 +104,7 @@ def format_info(info: RecordingInfo) -> str:
         f"frames     {frames}",
         f"duration   {info.duration_s:.3f} s",
         f"dropped    {dropped}",
+        f"damage     {damage or 'none'}",
         f"device     {device}",
         f"attached   {', '.join(info.attachments) or 'nothing'}",
         "topics",

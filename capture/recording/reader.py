@@ -7,18 +7,17 @@ from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from mcap.reader import SeekingReader
-from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
 from capture.errors import RecordingError
 from capture.recording import messages as m
 from capture.recording.frames import RgbdFrame
-from capture.recording.index import McapIndex, TopicInfo, read_index, stream_records
+from capture.recording.index import McapIndex, TopicInfo, damage_note, open_index
+from capture.recording.salvage import DECODE_ERRORS, McapSalvage
 from capture.recording.sync import (
     FrameSync,
     Topics,
@@ -30,14 +29,15 @@ from capture.recording.sync import (
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RecordingReader", "TopicInfo", "intrinsics_from_msg", "pose_from_msg", "read_index"]
+__all__ = ["RecordingReader", "TopicInfo", "intrinsics_from_msg", "pose_from_msg"]
 
 
 class RecordingReader:
     """Read a recording as a stream of synchronised `RgbdFrame` values.
 
     Usage: `with RecordingReader(path) as rec: for frame in rec.frames(): ...`.
-    Recordings that were never finished (a killed writer) replay every complete chunk.
+    Recordings that were never finished (a killed writer) or are damaged replay every intact
+    chunk; what was lost or skipped is said once in the log and kept in `warnings`.
     """
 
     def __init__(
@@ -47,9 +47,11 @@ class RecordingReader:
         self.sync_tolerance_ns = sync_tolerance_ns
         self.prefer_aligned = prefer_aligned
         self.unpaired_color_frames = 0
+        self.warnings: list[str] = []  # what the last open() and frames() distrusted or skipped
         self._index = McapIndex()
-        self._stream: IO[bytes] | None = None
+        self._salvage: McapSalvage | None = None
         self._decoders = DecoderFactory()
+        self._undecodable = 0
 
     # -- opening ---------------------------------------------------------------------------
     def __enter__(self) -> RecordingReader:
@@ -66,12 +68,12 @@ class RecordingReader:
 
     def open(self) -> None:
         """Open the file, read its summary (or scan it if unfinished) and find its topics."""
+        self._index, self._salvage = open_index(self.path)
+        self.warnings = []
+        note = damage_note(self._index, self.path)
+        if note:
+            self._warn(note)
         try:
-            self._stream = self.path.open("rb")
-        except OSError as err:
-            raise RecordingError(f"cannot open recording: {err.strerror}: {self.path}") from err
-        try:
-            self._index = read_index(self._stream, self.path)
             self._topics = self._discover()
         except RecordingError:
             self.close()
@@ -79,9 +81,13 @@ class RecordingReader:
 
     def close(self) -> None:
         """Close the file."""
-        if self._stream is not None:
-            self._stream.close()
-            self._stream = None
+        if self._salvage is not None:
+            self._salvage.close()
+            self._salvage = None
+
+    def _warn(self, text: str) -> None:
+        logger.warning("%s", text)
+        self.warnings.append(text)
 
     def _discover(self) -> Topics:
         found = ", ".join(f"{t.name} ({t.datatype})" for t in self.topics.values()) or "none"
@@ -192,47 +198,38 @@ class RecordingReader:
         """Return the time between the first and the last message."""
         return self.end_ns - self.start_ns
 
+    @property
+    def lost_frames(self) -> int:
+        """Return the colour frames the damaged parts of the file held, where it says."""
+        return self._index.lost.get(self._topics.color, 0)
+
     def attachment(self, name: str) -> bytes | None:
-        """Return the data of the named attachment, or None when the recording has none."""
-        data = self._index.attachments.get(name)
-        if data is not None or name not in self._index.attachments or self._stream is None:
-            return data
-        self._stream.seek(0)
-        for att in SeekingReader(self._stream).iter_attachments():
-            if att.name == name:
-                return att.data
-        return None
+        """Return the data of the named attachment, or None when absent or unreadable."""
+        return None if self._salvage is None else self._salvage.attachment(name)
 
     # -- frames ----------------------------------------------------------------------------
     def _messages(self, topics: list[str]) -> Iterator[tuple[str, Any, int]]:
-        """Yield (topic, decoded message, log_ns) in log-time order (file order if unfinished)."""
-        if self._stream is None:
+        """Yield (topic, decoded message, log_ns) in log-time order; skip undecodable ones."""
+        if self._salvage is None:
             raise RecordingError(
                 f"recording is not open; use `with RecordingReader(path)`: {self.path}"
             )
-        if self.finished:
-            self._stream.seek(0)
-            reader = SeekingReader(self._stream, decoder_factories=[self._decoders])
-            for _, channel, message, decoded in reader.iter_decoded_messages(
-                topics=topics, log_time_order=True
-            ):
-                yield channel.topic, decoded, message.log_time
-            return
         wanted = set(topics)
-        schemas: dict[int, Schema] = {}
-        channels: dict[int, Channel] = {}
-        for record in stream_records(self._stream):
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                channels[record.id] = record
-            elif isinstance(record, Message) and channels[record.channel_id].topic in wanted:
-                channel = channels[record.channel_id]
-                decoder = self._decoders.decoder_for(
-                    channel.message_encoding, schemas.get(channel.schema_id)
-                )
-                if decoder is not None:
-                    yield channel.topic, decoder(record.data), record.log_time
+        ids = {cid for cid, c in self._salvage.channels.items() if c.topic in wanted}
+        self._undecodable = 0
+        for record in self._salvage.messages(ids):
+            channel = self._salvage.channels[record.channel_id]
+            try:
+                schema = self._salvage.schemas.get(channel.schema_id)
+                decoder = self._decoders.decoder_for(channel.message_encoding, schema)
+                if decoder is None:
+                    raise RecordingError(f"no ROS 2 schema for '{channel.topic}'")
+                decoded = decoder(record.data)
+            except DECODE_ERRORS as err:  # corrupt CDR or schema: skip the message, count it
+                self._undecodable += 1
+                logger.debug("undecodable message on %s: %s", channel.topic, err)
+                continue
+            yield channel.topic, decoded, record.log_time
 
     def frames(
         self, *, start_ns: int | None = None, end_ns: int | None = None
@@ -252,19 +249,26 @@ class RecordingReader:
                 yield replace(frame, index=emitted)
                 emitted += 1
         self.unpaired_color_frames = sync.unpaired
+        self._report(sync, emitted)
+
+    def _report(self, sync: FrameSync, emitted: int) -> None:
+        """Say what was skipped; raise when nothing at all could be replayed."""
+        if self._undecodable:
+            self._warn(f"{self._undecodable} undecodable message(s) skipped: {self.path}")
+        for text in sync.notes():
+            self._warn(f"{text}: {self.path}")
         if sync.unpaired:
-            logger.warning(
-                "%d colour frames had no depth within %.0f ms and were skipped: %s",
-                sync.unpaired,
-                self.sync_tolerance_ns / 1e6,
-                self.path,
+            self._warn(
+                f"{sync.unpaired} colour frame(s) had no depth within "
+                f"{self.sync_tolerance_ns / 1e6:.0f} ms and were skipped: {self.path}"
             )
         if not self.finished:
-            logger.warning(
-                "recording was not finished (writer killed?); recovered %d frames: %s",
-                emitted,
-                self.path,
+            self._warn(
+                f"recording was not finished (writer killed?); recovered {emitted} frames: "
+                f"{self.path}"
             )
+        if sync.emitted == 0:
+            raise RecordingError(sync.why_none(self.path))
 
     def _synced(self, sync: FrameSync, topics: list[str]) -> Iterator[RgbdFrame]:
         for topic, msg, log_ns in self._messages(topics):
