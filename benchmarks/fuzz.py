@@ -20,6 +20,7 @@ import traceback
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Final
 
@@ -168,10 +169,10 @@ def run_mutants(
         what, data = mutate(base, seed)
         path = folder / f"mutant_{seed}.mcap"
         path.write_bytes(data)
-        yield seed, what, "info", classify(lambda p=path: capture_info(p))
+        yield seed, what, "info", classify(partial(capture_info, path))
         if with_run:
             out = folder / "out"
-            yield seed, what, "run", classify(lambda p=path: process_odometry(p, out))
+            yield seed, what, "run", classify(partial(process_odometry, path, out))
         path.unlink()
 
 

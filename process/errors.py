@@ -21,3 +21,7 @@ class CloudError(ReplayError):
 
 class StageError(ReplayError):
     """A pipeline stage cannot run on the input it was given."""
+
+
+class OutputError(ReplayError):
+    """The output folder cannot be used or an output file cannot be written."""

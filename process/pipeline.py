@@ -80,6 +80,8 @@ class ReplayPipeline:
                 )
                 logger.info("no ground truth in %s: metrics against it are skipped", self.recording)
             trajectory, gt_poses = self._replay_frames(rec)
+            for text in rec.warnings:  # already in the log
+                self._warn(text, logged=True)
             self._finish_odometry(trajectory, gt_poses)
             if "fusion" in self.stages:
                 cloud = self._fuse(rec, trajectory)
@@ -94,8 +96,7 @@ class ReplayPipeline:
                     f" {self.cfg.fusion.min_depth_m:g}..{self.cfg.fusion.max_depth_m:g} m;"
                     " refinement is skipped (check [fusion] and the recording's depth)"
                 )
-                self.viz.log_text(note, level="WARN")
-                logger.warning(note)
+                self._warn(note)
             elif "refinement" in self.stages:
                 self._refine(cloud, gt_cloud)
         self.result.metrics["seconds"] = {k: round(v, 3) for k, v in self._seconds.items()}
@@ -274,6 +275,13 @@ class ReplayPipeline:
             return None
         up: npt.NDArray[np.float64] = self._anchor[:3, :3] @ np.array([0.0, -1.0, 0.0])
         return up
+
+    def _warn(self, text: str, *, logged: bool = False) -> None:
+        """Say a warning in the .rrd and metrics.json "warnings" (and the log unless it was)."""
+        self.viz.log_text(text, level="WARN")
+        if not logged:
+            logger.warning("%s", text)
+        self.result.metrics.setdefault("warnings", []).append(text)
 
     def _write_config(self) -> None:
         path = self.out_dir / outputs.CONFIG

@@ -43,8 +43,13 @@ def write_tum(
             f.write("# timestamp tx ty tz qx qy qz qw\n")
             f.write("".join(lines))
         Path(tmp).replace(path)
-    except BaseException:
+    except BaseException as err:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(err, OSError):
+            raise ReplayError(
+                f"cannot write {path.name} ({err.strerror}); free space or choose another --out: "
+                f"{path.parent}"
+            ) from err
         raise
 
 
