@@ -214,6 +214,7 @@ class FrameSync:
         self.last_color_ns: int | None = None
         self.skipped: dict[str, int] = {}  # what was skipped -> how many
         self.reasons: dict[str, str] = {}  # what was skipped -> the first reason
+        self.no_depth = 0  # frames replayed although their depth has no valid pixel
 
     def _skip(self, what: str, reason: str) -> None:
         self.skipped[what] = self.skipped.get(what, 0) + 1
@@ -283,14 +284,27 @@ class FrameSync:
 
     def notes(self) -> list[str]:
         """Return one line per kind of skipped message or frame."""
-        return [f"{n} {what} skipped ({self.reasons[what]})" for what, n in self.skipped.items()]
+        notes = [f"{n} {what} skipped ({self.reasons[what]})" for what, n in self.skipped.items()]
+        if self.no_depth:
+            notes.append(
+                f"{self.no_depth} of {self.emitted} frame(s) have no valid depth pixel (all zero, "
+                "NaN or inf): they add nothing to the map"
+            )
+        return notes
 
     def why_none(self, path: Path) -> str:
         """Return the one-line error for a recording that gave no frame at all."""
         if self.colors == 0:
             return f"no readable colour frame on '{self.t.color}'; is the recording empty?: {path}"
         if self.skipped:
-            what, n = max(self.skipped.items(), key=lambda kv: kv[1])
+            # A bad calibration is the cause of the unusable frames: name it first.
+            what, n = min(
+                self.skipped.items(),
+                key=lambda kv: (
+                    not kv[0].startswith(("invalid camera_info", "invalid extr")),
+                    -kv[1],
+                ),
+            )
             return (
                 f"no frame could be replayed: {n} {what} ({self.reasons[what]}); "
                 f"fix or re-record the recording: {path}"
@@ -311,6 +325,7 @@ class FrameSync:
             return None
         if frame is not None:
             self.emitted += 1
+            self.no_depth += not bool((frame.depth_m > 0).any())
         return frame
 
     def _emit(self, p: _Pending) -> RgbdFrame | None:
