@@ -146,6 +146,6 @@ def test_prepare_out_refuses_a_folder_it_cannot_write(
         raise PermissionError(errno.EACCES, os.strerror(errno.EACCES))
 
     monkeypatch.setattr(Path, "write_bytes", denied)
-    with pytest.raises(OutputError, match="cannot write into --out .Permission denied"):
+    with pytest.raises(OutputError, match=r"cannot write into --out \(Permission denied"):
         outputs.prepare_out(tmp_path / "out", force=False)
     assert list((tmp_path / "out").iterdir()) == []
