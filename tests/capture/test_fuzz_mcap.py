@@ -40,7 +40,7 @@ def _mutants(data: bytes, seed: int) -> bytes:
         return bytes(out[:at] + bytes([rng.randrange(256)]) + out[at + 1 :])
     lines = bytes(out).split(b"\n")
     i = rng.randrange(min(len(lines), 12))
-    return b"\n".join(lines[:i] + [lines[i]] + lines[i:])  # a line twice
+    return b"\n".join([*lines[:i], lines[i], *lines[i:]])  # a line twice
 
 
 def test_mcap_mutants_through_info_and_run_never_end_in_a_traceback(tmp_path: Path) -> None:
@@ -72,8 +72,8 @@ def test_ply_mutants_read_or_fail_in_one_line(tmp_path: Path, fmt: str) -> None:
     )
     data = ply_bytes(cloud)
     if fmt == "ascii":
-        rows = "\n".join(" ".join(f"{v:g}" for v in (*p, *c, l)) for p, c, l in zip(
-            cloud.points, cloud.colors, cloud.labels, strict=True))  # fmt: skip
+        triples = zip(cloud.points, cloud.colors, cloud.labels, strict=True)
+        rows = "\n".join(" ".join(f"{v:g}" for v in (*p, *c, lab)) for p, c, lab in triples)
         head = data[: data.find(b"end_header")].replace(b"binary_little_endian", b"ascii")
         data = head + b"end_header\n" + rows.encode() + b"\n"
     path = tmp_path / "m.ply"

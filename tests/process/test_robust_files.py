@@ -121,7 +121,7 @@ def test_checkpoint_metadata_asking_for_absurd_shapes_is_refused_before_allocati
     path = save_checkpoint(ckpt, tmp_path / "absurd.safetensors")
     assert path.stat().st_size < 10_000
     started = time.perf_counter()
-    with pytest.raises(ModelError, match="aspp_channels.*expected channels <= 2048"):
+    with pytest.raises(ModelError, match=r"aspp_channels.*expected channels <= 2048"):
         load_checkpoint(path)
     assert time.perf_counter() - started < 2.0
 
