@@ -364,6 +364,9 @@ class McapSalvage:
             _, length = _HEAD.unpack_from(self._buf, pos)
             body = self._buf[pos + _HEAD.size : pos + _HEAD.size + length]
             att = Attachment.read(ReadDataStream(io.BytesIO(body)))
+            (crc,) = struct.unpack_from("<I", body, len(body) - 4)
+            if crc and zlib.crc32(body[:-4]) != crc:
+                raise DamagedError("attachment CRC mismatch")
         except DECODE_ERRORS as err:
             logger.warning("attachment %r is unreadable (%s): %s", name, _reason(err), self.path)
             return None

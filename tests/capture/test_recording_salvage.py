@@ -169,3 +169,21 @@ def test_files_with_nothing_recoverable_are_one_line(
     assert result.exit_code == 1
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {message}")
+
+
+def test_a_corrupt_attachment_is_none_not_wrong_bytes(tmp_path: Path) -> None:
+    from capture.recording import RecordingWriter
+
+    path = tmp_path / "att.mcap"
+    payload = b"ply\n" + bytes(range(256)) * 8
+    with RecordingWriter(path) as writer:
+        writer.write_attachment("cloud.ply", payload, media_type="model/ply", log_ns=1)
+    data = bytearray(path.read_bytes())
+    for flip, expected in ((False, payload), (True, None)):
+        if flip:
+            data[data.find(payload) + 100] ^= 0x01
+            path.write_bytes(bytes(data))
+        walker = McapSalvage(path)
+        walker.scan()
+        assert walker.attachment("cloud.ply") == expected
+        walker.close()
