@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from capture.errors import RecordingError
-from capture.recording.index import McapIndex, TopicInfo, damage_note, open_index
+from capture.recording.index import TopicInfo, damage_note
 from capture.recording.reader import RecordingReader
 
 
@@ -40,22 +40,31 @@ class RecordingInfo:
 def describe(path: Path) -> RecordingInfo:
     """Return the summary of a recording (finished, recovered or damaged; RGB-D or not).
 
-    The frame count is what `process run` replays: for an intact finished recording the colour
-    frames that pair with depth are counted from the intact data; for an unfinished or damaged
-    one the frames are replayed (decoded), so that both commands give the same number.
+    The frame count: for an intact finished recording, its colour frames; for an unfinished or
+    damaged one, the frames that `process run` replays (they are decoded here, so that both
+    commands give the same number).
     """
     path = Path(path)
-    index, salvage = open_index(path)
-    salvage.close()
+    rec = RecordingReader(path)
     frames: int | None = None
     aligned: bool | None = None
     reason = ""
     try:
-        with RecordingReader(path) as rec:
-            aligned = rec.aligned
-            frames = _count_frames(rec, index)
+        rec.open()
     except RecordingError as err:
+        if rec.index is None:
+            raise  # not a file, not MCAP, nothing readable: nothing to describe
         reason = str(err)
+    else:
+        with rec:
+            aligned = rec.aligned
+            try:
+                frames = _count_frames(rec)
+            except RecordingError as err:
+                reason = str(err)
+    index = rec.index
+    if index is None:  # open() read it or raised above
+        raise RecordingError(f"recording could not be read: {path}")
     return RecordingInfo(
         path=path,
         finished=index.finished,
@@ -71,9 +80,10 @@ def describe(path: Path) -> RecordingInfo:
     )
 
 
-def _count_frames(rec: RecordingReader, index: McapIndex) -> int:
+def _count_frames(rec: RecordingReader) -> int:
     """Return the frames a run replays (a replay when the file is damaged or unfinished)."""
-    if index.finished and not index.damage.any and not index.duplicates:
+    index = rec.index
+    if index is not None and index.finished and not index.damage.any and not index.duplicates:
         return len(rec)
     return sum(1 for _ in rec.frames())
 

@@ -49,6 +49,7 @@ class RecordingReader:
         self.unpaired_color_frames = 0
         self.warnings: list[str] = []  # what the last open() and frames() distrusted or skipped
         self._index = McapIndex()
+        self._index_read = False
         self._salvage: McapSalvage | None = None
         self._decoders = DecoderFactory()
         self._undecodable = 0
@@ -69,6 +70,7 @@ class RecordingReader:
     def open(self) -> None:
         """Open the file, read its summary (or scan it if unfinished) and find its topics."""
         self._index, self._salvage = open_index(self.path)
+        self._index_read = True
         self.warnings = []
         note = damage_note(self._index, self.path)
         if note:
@@ -86,6 +88,8 @@ class RecordingReader:
             self._salvage = None
 
     def _warn(self, text: str) -> None:
+        if text in self.warnings:  # a second pass over the frames says nothing new
+            return
         logger.warning("%s", text)
         self.warnings.append(text)
 
@@ -138,6 +142,14 @@ class RecordingReader:
         return Topics(color, color_info, depth, depth_info, use_aligned, extrinsics, metadata, gt)
 
     # -- properties --------------------------------------------------------------------------
+    @property
+    def index(self) -> McapIndex | None:
+        """Return what the walk of the file found, or None before open() read it.
+
+        open() sets it even when it then refuses the recording (not RGB-D).
+        """
+        return self._index if self._index_read else None
+
     @property
     def finished(self) -> bool:
         """Return whether the file was finished (has a summary) rather than recovered."""
