@@ -41,6 +41,7 @@ class McapIndex:
     damage: Damage = field(default_factory=Damage)
     lost: dict[str, int] = field(default_factory=dict)  # messages lost per topic, where known
     duplicates: int = 0  # repeated messages (duplicated chunks or records), dropped
+    damage_chunks_at_open: int = 0  # damaged chunks found by the walk (more may be found later)
 
 
 def check_regular_file(path: Path) -> None:
@@ -55,8 +56,11 @@ def check_regular_file(path: Path) -> None:
         )
 
 
-def open_index(path: Path) -> tuple[McapIndex, McapSalvage]:
+def open_index(path: Path, *, verify: bool = True) -> tuple[McapIndex, McapSalvage]:
     """Walk the recording at path; return its index and the walker that reads its messages.
+
+    verify=False trusts an intact summary (see `McapSalvage.scan`): damaged chunks are then
+    found, skipped and counted while the messages are read.
 
     Raises:
         RecordingError: not a regular file, not MCAP, or nothing in it is readable.
@@ -72,7 +76,7 @@ def open_index(path: Path) -> tuple[McapIndex, McapSalvage]:
         raise RecordingError(
             f"not an MCAP file (bad magic bytes); expected a .mcap recording: {path}"
         )
-    salvage.scan()
+    salvage.scan(verify=verify)
     if not (salvage.channels or salvage.metadata or salvage.finished):
         salvage.close()
         found = "; ".join(salvage.damage.reasons[:2]) or "no record after the magic bytes"
@@ -92,6 +96,7 @@ def _index_of(salvage: McapSalvage) -> McapIndex:
         end_ns=salvage.end_ns,
         damage=salvage.damage,
         duplicates=salvage.duplicates,
+        damage_chunks_at_open=salvage.damage.chunks_lost,
     )
     for cid, channel in sorted(salvage.channels.items()):
         schema = salvage.schemas.get(channel.schema_id)

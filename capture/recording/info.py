@@ -45,7 +45,7 @@ def describe(path: Path) -> RecordingInfo:
     commands give the same number).
     """
     path = Path(path)
-    rec = RecordingReader(path)
+    rec = RecordingReader(path, verify=True)  # every chunk checked: exact counts
     frames: int | None = None
     aligned: bool | None = None
     reason = ""

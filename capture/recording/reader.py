@@ -41,9 +41,16 @@ class RecordingReader:
     """
 
     def __init__(
-        self, path: Path, *, sync_tolerance_ns: int = 20_000_000, prefer_aligned: bool = True
+        self,
+        path: Path,
+        *,
+        sync_tolerance_ns: int = 20_000_000,
+        prefer_aligned: bool = True,
+        verify: bool = False,
     ) -> None:
+        """Prepare to read path; verify=True checks every chunk at open() (exact counts)."""
         self.path = Path(path)
+        self.verify = verify
         self.sync_tolerance_ns = sync_tolerance_ns
         self.prefer_aligned = prefer_aligned
         self.unpaired_color_frames = 0
@@ -69,7 +76,7 @@ class RecordingReader:
 
     def open(self) -> None:
         """Open the file, read its summary (or scan it if unfinished) and find its topics."""
-        self._index, self._salvage = open_index(self.path)
+        self._index, self._salvage = open_index(self.path, verify=self.verify)
         self._index_read = True
         self.warnings = []
         note = damage_note(self._index, self.path)
@@ -203,7 +210,19 @@ class RecordingReader:
     def depth_scale_m(self) -> float:
         """Return metres per depth unit: the `device` record's depth_scale_m, else 1 mm."""
         text = self.metadata.get("device", {}).get("depth_scale_m")
-        return float(text) if text else 0.001
+        if not text:
+            return 0.001
+        try:
+            scale = float(text)
+        except ValueError:
+            scale = float("nan")
+        if not 1e-6 <= scale <= 1.0:  # also NaN
+            self._warn(
+                f"device depth_scale_m {text!r} is not metres per unit in [1e-6, 1]; using "
+                f"0.001 (1 mm, the D435's): {self.path}"
+            )
+            return 0.001
+        return scale
 
     @property
     def duration_ns(self) -> int:
@@ -265,6 +284,10 @@ class RecordingReader:
 
     def _report(self, sync: FrameSync, emitted: int) -> None:
         """Say what was skipped; raise when nothing at all could be replayed."""
+        lost = self._salvage.damage.chunks_lost if self._salvage else 0
+        if lost > self._index.damage_chunks_at_open:
+            new = lost - self._index.damage_chunks_at_open
+            self._warn(f"{new} damaged chunk(s) skipped while replaying: {self.path}")
         if self._undecodable:
             self._warn(f"{self._undecodable} undecodable message(s) skipped: {self.path}")
         for text in sync.notes():

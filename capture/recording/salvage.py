@@ -25,6 +25,7 @@ import lz4.frame
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
+from mcap.reader import SeekingReader
 from mcap.records import (
     Attachment,
     AttachmentIndex,
@@ -47,6 +48,7 @@ MAX_CHUNK_BYTES: Final = 1 << 31  # a chunk that claims more is damaged (ours ar
 # one of them means "this chunk or record is damaged", which is skipped and counted.
 DECODE_ERRORS: Final = (Exception,)
 _HEAD: Final = struct.Struct("<BQ")
+_MESSAGE_FIXED: Final = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
 _CHUNK_FIXED: Final = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, name length
 _RESYNC: Final = (b"\x04\x00\x00\x00zstd", b"\x03\x00\x00\x00lz4")  # compression names
 _NAME_AT: Final = 9 + 8 + 8 + 8 + 4  # offset of the compression name's length in a chunk
@@ -54,6 +56,18 @@ _NAME_AT: Final = 9 + 8 + 8 + 8 + 4  # offset of the compression name's length i
 
 class DamagedError(Exception):
     """A chunk or record that cannot be read (internal: always caught and counted)."""
+
+
+@dataclass(frozen=True, slots=True)
+class RawMessage:
+    """A message record: its header and, when it was asked for, its payload."""
+
+    channel_id: int
+    sequence: int
+    log_time: int
+    publish_time: int
+    size: int  # of the payload in the file
+    data: bytes  # the payload, or b"" when only counted
 
 
 @dataclass(slots=True)
@@ -125,14 +139,53 @@ class McapSalvage:
         return bytes(self._buf[: len(MAGIC)]) == MAGIC
 
     # -- the walk ----------------------------------------------------------------------------
-    def scan(self) -> None:
-        """Walk the file; then try what an intact summary or footer points at."""
+    def scan(self, *, verify: bool = True) -> None:
+        """Find the file's contents.
+
+        verify=True walks the file and decompresses every chunk (exact counts of what is
+        intact); verify=False trusts an intact summary whose chunk headers are where it says,
+        and leaves the chunks to be checked as they are read (`messages()` skips and counts a
+        damaged one), falling back to the full walk when there is no such summary.
+        """
+        if not verify and self._from_summary():
+            return
         self._walk(len(MAGIC))
         summary_start = self._footer_summary_start()
         if summary_start is not None and summary_start not in self._seen:
             self._walk(summary_start, from_index=True)
         self._times()
         self._lost_from_summary()
+
+    def _from_summary(self) -> bool:
+        """Take the index from an intact summary; return False (and change nothing) if none."""
+        try:
+            with self.path.open("rb") as f:
+                summary = SeekingReader(f).get_summary()
+            if summary is None or summary.statistics is None:
+                return False
+            stats = summary.statistics
+            chunks = [
+                ChunkInfo(c.chunk_start_offset, c.message_start_time, c.message_end_time)
+                for c in summary.chunk_indexes
+            ]
+            plausible = all(self._plausible_chunk(c.offset) for c in chunks)
+            if not plausible or (stats.message_count and not chunks):
+                return False
+        except DECODE_ERRORS:
+            return False
+        self.schemas, self.channels = dict(summary.schemas), dict(summary.channels)
+        self.chunks = chunks
+        self.counts = dict(stats.channel_message_counts)
+        self.summary_counts = dict(self.counts)
+        self.finished = True
+        for entry in summary.metadata_indexes:
+            if self._in_file(entry.offset):
+                self._walk_one(entry.offset)
+        for att in summary.attachment_indexes:
+            if self._in_file(att.offset):
+                self.attachments.setdefault(att.name, att.offset)
+        self._times()
+        return True
 
     def _walk(self, pos: int, *, from_index: bool = False) -> None:
         """Walk records from pos; from_index: pos came from the summary, trust it less."""
@@ -271,7 +324,7 @@ class McapSalvage:
     # -- chunks ------------------------------------------------------------------------------
     def _chunk(self, pos: int) -> bool:
         try:
-            records = self.chunk_records(pos)
+            records = _inner_records(self.chunk_data(pos), wanted=None)
         except DECODE_ERRORS as err:
             self._last_chunk_lost = True
             self.damage.chunks_lost += 1
@@ -290,7 +343,7 @@ class McapSalvage:
             self.chunks.append(ChunkInfo(pos, min(times), max(times)))
         return True
 
-    def _first(self, msg: Message) -> bool:
+    def _first(self, msg: RawMessage) -> bool:
         """Count a message unless it repeats one already seen (a duplicated chunk or record)."""
         key = _key(msg)
         if key in self._keys:
@@ -300,8 +353,12 @@ class McapSalvage:
         self.counts[msg.channel_id] = self.counts.get(msg.channel_id, 0) + 1
         return True
 
-    def chunk_records(self, pos: int) -> list[Schema | Channel | Message]:
+    def chunk_records(self, pos: int) -> list[Schema | Channel | RawMessage]:
         """Return the schemas, channels and messages of the chunk at pos; raise if damaged."""
+        return _inner_records(self.chunk_data(pos), wanted=set(self.channels) | {-1})
+
+    def chunk_data(self, pos: int) -> bytes:
+        """Return the decompressed, CRC-checked records of the chunk at pos; raise if damaged."""
         buf = self._buf
         opcode, length = _HEAD.unpack_from(buf, pos)
         end = pos + _HEAD.size + length
@@ -316,9 +373,9 @@ class McapSalvage:
         data = _decompress(name, bytes(buf[data_at : data_at + data_len]), size)
         if crc and zlib.crc32(data) != crc:
             raise DamagedError("chunk CRC mismatch")
-        return _inner_records(data)
+        return data
 
-    def messages(self, channel_ids: set[int]) -> Iterator[Message]:
+    def messages(self, channel_ids: set[int]) -> Iterator[RawMessage]:
         """Yield the messages of these channels from the intact data, in log-time order.
 
         Chunks are read one at a time (ordered by their first message), merged with a heap
@@ -327,32 +384,32 @@ class McapSalvage:
         units = [(c.start_ns, c.offset, True) for c in self.chunks]
         units += [(t, offset, False) for t, offset in self.loose]
         units.sort()
-        heap: list[tuple[int, int, Message]] = []
+        heap: list[tuple[int, int, RawMessage]] = []
         keys: set[tuple[int, int, int, int, int]] = set()
         order = 0
         i = 0
         while i < len(units) or heap:
             while i < len(units) and (not heap or units[i][0] <= heap[0][0]):
-                for msg in self._unit(units[i][1], chunk=units[i][2]):
+                for msg in self._unit(units[i][1], chunk=units[i][2], wanted=channel_ids):
                     if msg.channel_id in channel_ids and _key(msg) not in keys:
-                        keys.add(_key(msg))
+                        keys.add(_key(msg))  # duplicates were counted by the scan
                         heapq.heappush(heap, (msg.log_time, order, msg))
                         order += 1
                 i += 1
             if heap:
                 yield heapq.heappop(heap)[2]
 
-    def _unit(self, pos: int, *, chunk: bool) -> list[Message]:
+    def _unit(self, pos: int, *, chunk: bool, wanted: set[int]) -> list[RawMessage]:
         try:
             if chunk:
-                return [r for r in self.chunk_records(pos) if isinstance(r, Message)]
+                records = _inner_records(self.chunk_data(pos), wanted=wanted)
+                return [r for r in records if isinstance(r, RawMessage)]
             _, length = _HEAD.unpack_from(self._buf, pos)
             body = self._buf[pos + _HEAD.size : pos + _HEAD.size + length]
             return [_message(ReadDataStream(io.BytesIO(body)), length)]
-        except DECODE_ERRORS as err:  # read intact before; only a changing file gets here
-            logger.warning(
-                "cannot read the record at offset %d again (%s): %s", pos, err, self.path
-            )
+        except DECODE_ERRORS as err:  # a chunk the summary vouched for (scan(verify=False))
+            self.damage.chunks_lost += 1
+            self.damage.note(f"chunk at offset {pos}: {_reason(err)}")
             return []
 
     def attachment(self, name: str) -> bytes | None:
@@ -408,36 +465,42 @@ def _decompress(name: str, data: bytes, size: int) -> bytes:
     return out
 
 
-def _inner_records(data: bytes) -> list[Schema | Channel | Message]:
-    records: list[Schema | Channel | Message] = []
+def _inner_records(data: bytes, *, wanted: set[int] | None) -> list[Schema | Channel | RawMessage]:
+    """Return a chunk's schemas, channels and messages (data only of the wanted channels)."""
+    records: list[Schema | Channel | RawMessage] = []
     pos = 0
     while pos < len(data):
         if pos + _HEAD.size > len(data):
             raise DamagedError("chunk ends inside a record header")
         opcode, length = _HEAD.unpack_from(data, pos)
-        end = pos + _HEAD.size + length
+        body_at, end = pos + _HEAD.size, pos + _HEAD.size + length
         if end > len(data):
             raise DamagedError("chunk record runs past the chunk")
-        body = ReadDataStream(io.BytesIO(data[pos + _HEAD.size : end]))
-        if opcode == Opcode.SCHEMA:
-            records.append(Schema.read(body))
-        elif opcode == Opcode.CHANNEL:
-            records.append(Channel.read(body))
-        elif opcode == Opcode.MESSAGE:
-            records.append(_message(body, length))
+        if opcode == Opcode.MESSAGE:
+            if length < _MESSAGE_FIXED.size:
+                raise DamagedError(f"message record of {length} bytes (at least 22)")
+            channel, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack_from(data, body_at)
+            size = length - _MESSAGE_FIXED.size
+            keep = wanted is not None and channel in wanted
+            payload = data[body_at + _MESSAGE_FIXED.size : end] if keep else b""
+            records.append(RawMessage(channel, sequence, log_time, publish_time, size, payload))
+        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+            body = ReadDataStream(io.BytesIO(data[body_at:end]))
+            records.append(Schema.read(body) if opcode == Opcode.SCHEMA else Channel.read(body))
         pos = end
     return records
 
 
-def _message(body: ReadDataStream, length: int) -> Message:
-    if length < 22:
+def _message(body: ReadDataStream, length: int) -> RawMessage:
+    if length < _MESSAGE_FIXED.size:
         raise DamagedError(f"message record of {length} bytes (at least 22)")
-    msg: Message = Message.read(body, length)
-    return msg
+    msg = Message.read(body, length)
+    size = length - _MESSAGE_FIXED.size
+    return RawMessage(msg.channel_id, msg.sequence, msg.log_time, msg.publish_time, size, msg.data)
 
 
-def _key(msg: Message) -> tuple[int, int, int, int, int]:
-    return msg.channel_id, msg.log_time, msg.publish_time, msg.sequence, len(msg.data)
+def _key(msg: RawMessage) -> tuple[int, int, int, int, int]:
+    return msg.channel_id, msg.log_time, msg.publish_time, msg.sequence, msg.size
 
 
 def _reason(err: BaseException) -> str:

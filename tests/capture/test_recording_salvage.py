@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.records import Message
 from typer.testing import CliRunner
 
 from benchmarks.fuzz import top_level_records, write_base_recording
@@ -14,7 +13,7 @@ from capture.cli import app
 from capture.errors import RecordingError
 from capture.recording import RecordingReader
 from capture.recording.info import describe
-from capture.recording.salvage import McapSalvage
+from capture.recording.salvage import McapSalvage, RawMessage
 
 COLOR = "/camera/camera/color/image_raw"
 DEPTH = "/camera/camera/depth/image_rect_raw"
@@ -40,7 +39,7 @@ def _chunks(data: bytes, tmp_path: Path) -> list[tuple[int, int, dict[str, list[
             continue
         topics: dict[str, list[int]] = {}
         for record in walker.chunk_records(start):
-            if isinstance(record, Message):
+            if isinstance(record, RawMessage):
                 topic = walker.channels[record.channel_id].topic
                 topics.setdefault(topic, []).append(record.log_time)
         out.append((start, end, topics))
@@ -187,3 +186,21 @@ def test_a_corrupt_attachment_is_none_not_wrong_bytes(tmp_path: Path) -> None:
         walker.scan()
         assert walker.attachment("cloud.ply") == expected
         walker.close()
+
+
+def test_a_corrupt_chunk_behind_an_intact_summary_is_found_while_replaying(
+    base: bytes, tmp_path: Path
+) -> None:
+    chunks = _chunks(base, tmp_path)
+    i = len(chunks) // 2
+    start, end, _ = chunks[i]
+    damaged = bytearray(base)
+    damaged[(start + end) // 2] ^= 0xFF
+    path = tmp_path / "flipped.mcap"
+    path.write_bytes(bytes(damaged))
+    stamps, warnings = _replay(path)  # the summary is trusted at open: no decompression then
+    assert len(stamps) == _expected(chunks, {i})
+    assert any("1 damaged chunk(s) skipped while replaying" in w for w in warnings)
+    info = describe(path)  # info checks every chunk
+    assert info.frames == len(stamps)
+    assert "1 damaged chunk(s) skipped" in info.damage

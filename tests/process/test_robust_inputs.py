@@ -77,3 +77,20 @@ def test_the_reader_keeps_warnings_for_the_rrd(tmp_path: Path) -> None:
     with RecordingReader(path) as rec:
         assert len(list(rec.frames())) == FRAMES
         assert any("2 of 8 frame(s) have no valid depth pixel" in w for w in rec.warnings)
+
+
+@pytest.mark.parametrize("scale", ["\x13.001", "nan", "-1", "0"])
+def test_a_corrupt_depth_scale_is_said_and_the_default_used(tmp_path: Path, scale: str) -> None:
+    from capture.recording import RecordingWriter
+
+    path = write_case(tmp_path / "rec.mcap", Case())
+    scaled = tmp_path / "scaled.mcap"
+    with RecordingReader(path) as rec, RecordingWriter(scaled) as writer:
+        writer.write_metadata("device", {"depth_scale_m": scale})
+        writer.write_calibration(next(rec.frames()).depth_to_color, stamp_ns=1)  # type: ignore[arg-type]
+        for frame in rec.frames():
+            writer.write_frame(frame)
+    with RecordingReader(scaled) as rec:
+        depths = [float(f.depth_m.max()) for f in rec.frames()]
+        assert depths == [2.0] * FRAMES
+        assert any("depth_scale_m" in w and "using 0.001" in w for w in rec.warnings)
