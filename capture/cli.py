@@ -104,8 +104,8 @@ def record(
         --depth-height 480 --depth-fps 90 --compression lz4
     ```
     """
-    from capture.realsense.record import RecordConfig
     from capture.realsense.record import record as record_camera
+    from capture.realsense.session import RecordConfig
     from capture.realsense.sink import stop_on_signals
 
     config = RecordConfig(

@@ -93,7 +93,8 @@ def _run(
     from process import outputs
     from process.config import load_config, resolve_stages
     from process.pipeline import ReplayPipeline
-    from viz.rerun_log import NullLogger, RerunLogger
+    from viz.logger import NullLogger
+    from viz.rerun_log import RerunLogger
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)

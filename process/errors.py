@@ -24,4 +24,4 @@ class StageError(ReplayError):
 
 
 class OutputError(ReplayError):
-    """The output folder cannot be used or an output file cannot be written."""
+    """An output file cannot be written (no space, no permission, not a folder)."""

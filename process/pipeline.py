@@ -26,6 +26,7 @@ from process.depth import DepthProcessor
 from process.evaluate import class_counts, confusion_matrix, ratios
 from process.odometry.odometry import Odometry
 from process.trajectory import ate_rmse, path_length, rpe, write_tum
+from viz.layout import STAGE_FUSED
 from viz.logger import Logger
 
 logger = logging.getLogger(__name__)
@@ -88,7 +89,7 @@ class ReplayPipeline:
             gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
         if "fusion" in self.stages:
             self._write_cloud(outputs.MAP_FUSED, cloud)
-            self.viz.set_stage(0)
+            self.viz.set_stage(STAGE_FUSED)
             self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
             if "refinement" in self.stages and len(cloud) == 0:
                 note = (

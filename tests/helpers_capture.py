@@ -207,7 +207,8 @@ def _kill_writer(out: Path) -> None:
 
 
 def _record_until_signal(out: Path) -> None:
-    from capture.realsense.record import RecordConfig, record
+    from capture.realsense.record import record
+    from capture.realsense.session import RecordConfig
     from capture.realsense.sink import stop_on_signals
 
     cam = SoftCamera()

@@ -20,30 +20,16 @@ from typing import Any
 
 from capture.errors import CameraError
 from capture.realsense.camera import Camera
-from capture.realsense.device import configure, find_device, intrinsics_of, select_streams
+from capture.realsense.device import configure, find_device, select_streams
 from capture.realsense.session import (
     RecordConfig,
     RecordResult,
     RecordStatus,
-    capture_record,
     finish_session,
     start_sink,
     watch,
 )
-
-__all__ = [
-    "Camera",
-    "RecordConfig",
-    "RecordResult",
-    "RecordStatus",
-    "configure",
-    "convert",
-    "find_device",
-    "intrinsics_of",
-    "record",
-    "rs_module",
-    "select_streams",
-]
+from capture.recording.writer import capture_record
 
 
 def rs_module() -> Any:
@@ -84,7 +70,9 @@ def record(
         streams = select_streams(rs, dev, config)
         configure(rs, streams, config)
     sink = start_sink(Path(path), streams, config=config, blocking=False)
-    sink.writer.write_metadata("capture", capture_record("live", asdict(config)))
+    sink.writer.write_metadata(
+        "capture", capture_record("semreplay-capture record", source="live", config=asdict(config))
+    )
     camera = Camera(rs, streams, sink, align=config.align)
     t0 = time.monotonic()
     reason, lost = "stopped", False
@@ -114,7 +102,12 @@ def convert(
         raise CameraError(f"{err}: {src}") from err
     config = RecordConfig(compression=compression, queue_size=16)
     sink = start_sink(Path(out), streams, config=config, blocking=True)
-    sink.writer.write_metadata("capture", capture_record(str(src), {"compression": compression}))
+    sink.writer.write_metadata(
+        "capture",
+        capture_record(
+            "semreplay-capture convert", source=str(src), config={"compression": compression}
+        ),
+    )
     camera = Camera(rs, streams, sink, align=False)
     t0 = time.monotonic()
     try:

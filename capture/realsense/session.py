@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -113,26 +110,6 @@ class Restartable(Protocol):
 
     def stop(self) -> None:
         """Stop the camera's sensors."""
-
-
-def tool_version() -> str:
-    """Return the installed version of semreplay."""
-    try:
-        return version("semreplay")
-    except PackageNotFoundError:
-        return "0+unknown"
-
-
-def capture_record(source: str, settings: dict[str, object]) -> dict[str, object]:
-    """Return the start of the `capture` metadata record of RECORDING.md."""
-    return {
-        "tool": "semreplay-capture",
-        "version": tool_version(),
-        "source": source,
-        "config": settings,
-        "host": socket.gethostname(),
-        "start_time": datetime.now().astimezone().isoformat(timespec="seconds"),
-    }
 
 
 def watch(

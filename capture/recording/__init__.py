@@ -16,6 +16,7 @@ from capture.recording.frames import (
     Extrinsics,
     GroundTruth,
     Intrinsics,
+    Label,
     RgbdFrame,
 )
 from capture.recording.messages import DEFAULT_NAMESPACE, GT_CLOUD_ATTACHMENT
@@ -34,6 +35,7 @@ __all__ = [
     "Extrinsics",
     "GroundTruth",
     "Intrinsics",
+    "Label",
     "RecordingError",
     "RecordingReader",
     "RecordingWriter",

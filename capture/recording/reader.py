@@ -9,8 +9,6 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import numpy as np
-import numpy.typing as npt
 from mcap_ros2.decoder import DecoderFactory
 
 from capture.errors import RecordingError
@@ -21,8 +19,6 @@ from capture.recording.salvage import DECODE_ERRORS, McapSalvage
 from capture.recording.sync import (
     FrameSync,
     Topics,
-    decode_color,
-    decode_depth,
     intrinsics_from_msg,
     pose_from_msg,
 )
@@ -309,12 +305,3 @@ class RecordingReader:
         for topic, msg, log_ns in self._messages(topics):
             yield from sync.push(topic, msg, log_ns)
         yield from sync.drain()
-
-    # -- decoding --------------------------------------------------------------------------
-    def decode_color(self, topic: str, msg: Any) -> npt.NDArray[np.uint8]:
-        """Return an (H, W, 3) RGB image from a decoded Image or CompressedImage."""
-        return decode_color(topic, msg, self.path)
-
-    def decode_depth(self, topic: str, msg: Any) -> npt.NDArray[np.float32]:
-        """Return depth in metres (0 = none) from a decoded 16UC1/mono16/32FC1 Image."""
-        return decode_depth(topic, msg, self.path, scale_m=self.depth_scale_m)

@@ -8,9 +8,9 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Intrinsics
+from process.geometry import rigid_inverse
 from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import Keyframe, visible_share
-from process.odometry.pnp import rigid_inverse
 
 if TYPE_CHECKING:
     from process.odometry.config import OdometryConfig

@@ -30,7 +30,7 @@ from capture.recording import Intrinsics, RgbdFrame
 from process.odometry.config import OdometryConfig
 from process.odometry.dense import DenseAligner
 from process.odometry.features import FeatureExtractor, Keyframe
-from process.odometry.loop_closure import PoseGraph
+from process.odometry.pose_graph import PoseGraph
 from process.odometry.state import TrackState
 from process.odometry.tracker import Tracker
 

@@ -9,12 +9,14 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import RgbdFrame
+from process.geometry import rigid_inverse
 from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
 from process.odometry.keyframes import needs_keyframe, refine_densely
 from process.odometry.locate import Located, Locator
-from process.odometry.loop_closure import Edge, LoopCloser, PoseGraph
-from process.odometry.pnp import information_from_points, rigid_inverse
+from process.odometry.loop_closure import LoopCloser
+from process.odometry.pnp import information_from_points
+from process.odometry.pose_graph import Edge, PoseGraph
 from process.odometry.state import TrackState, match_arrays
 
 if TYPE_CHECKING:

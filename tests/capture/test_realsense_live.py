@@ -28,7 +28,8 @@ from helpers_capture import (
 )
 
 from capture.errors import CameraError, CaptureError
-from capture.realsense.record import RecordConfig, RecordResult, RecordStatus, record
+from capture.realsense.record import record
+from capture.realsense.session import RecordConfig, RecordResult, RecordStatus
 from capture.realsense.sink import StreamFrame, ThreadedWriter
 from capture.recording import RecordingReader, RecordingWriter
 

@@ -61,10 +61,14 @@ def test_a_failing_run_leaves_the_old_folder_as_it_was(
     assert _run(small, out, "--no-viz")[0] == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
 
-    def full(*_: object, **__: object) -> None:
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    write_text = Path.write_text
 
-    monkeypatch.setattr("process.trajectory.os.fdopen", full)
+    def full(self: Path, *args: object, **kwargs: object) -> int:
+        if outputs.TRAJECTORY in self.name:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return write_text(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Path, "write_text", full)
     code, errors = _run(small, out, "--no-viz", "--force")
     assert code == 1 and len(errors) == 1
     assert "cannot write trajectory.tum (No space left on device)" in errors[0]
