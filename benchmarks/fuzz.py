@@ -2,8 +2,9 @@
 
 Each mutant (truncation, byte flips, zeroed range, chunk surgery, a file that is not MCAP) is
 given to `semreplay-capture info` and `semreplay-process run --stages odometry --no-viz`, in
-this process, and every outcome is classed: exit 0, a clean one-line error, a traceback, or a
-hang (over the time limit). The counts by class are printed; a traceback or a hang is a bug.
+this process, and every outcome is classed: exit 0, a clean one-line error, a traceback, a
+hang (over the time limit) or a partial file (a temporary left in --out). The counts by class
+are printed; a traceback, a hang or a partial file is a bug.
 The mutants are deterministic (seeded), so a failing one can be rebuilt from its number.
 Not a `bench_*` module: `make bench` does not run it.
 """
@@ -26,7 +27,7 @@ from typing import Final
 
 import numpy as np
 
-OUTCOMES: Final = ("exit 0", "one-line error", "traceback", "hang")
+OUTCOMES: Final = ("exit 0", "one-line error", "traceback", "hang", "partial file")
 _HEAD: Final = struct.Struct("<BQ")
 W, H = 96, 72
 
@@ -35,7 +36,7 @@ W, H = 96, 72
 class Outcome:
     """How one command ended on one input."""
 
-    kind: str  # one of OUTCOMES
+    kind: str  # one of OUTCOMES; "partial file": a temporary was left in --out
     detail: str  # the error line or the traceback's last line
 
 
@@ -172,7 +173,15 @@ def run_mutants(
         yield seed, what, "info", classify(partial(capture_info, path))
         if with_run:
             out = folder / "out"
-            yield seed, what, "run", classify(partial(process_odometry, path, out))
+            outcome = classify(partial(process_odometry, path, out))
+            left = (
+                sorted(p.name for p in out.iterdir() if p.name.startswith("."))
+                if out.is_dir()
+                else []
+            )
+            if left:
+                outcome = Outcome("partial file", ", ".join(left))
+            yield seed, what, "run", outcome
         path.unlink()
 
 
@@ -189,7 +198,7 @@ def main(argv: list[str]) -> int:
         base = write_base_recording(Path(tmp) / "base.mcap").read_bytes()
         for seed, what, command, outcome in run_mutants(base, range(count), Path(tmp)):
             counts[(command, outcome.kind)] += 1
-            if outcome.kind in ("traceback", "hang"):
+            if outcome.kind in ("traceback", "hang", "partial file"):
                 bad.append(f"seed {seed} ({what}) {command}: {outcome.detail}")
     print(
         f"{count} mutants of a {len(base)}-byte recording in {time.perf_counter() - started:.0f} s"

@@ -94,3 +94,25 @@ def test_a_corrupt_depth_scale_is_said_and_the_default_used(tmp_path: Path, scal
         depths = [float(f.depth_m.max()) for f in rec.frames()]
         assert depths == [2.0] * FRAMES
         assert any("depth_scale_m" in w and "using 0.001" in w for w in rec.warnings)
+
+
+@pytest.mark.parametrize(
+    ("case", "warning"),
+    [
+        (Case(nan_depth_32f=True), "8 of 8 frame(s) have no valid depth pixel"),
+        (Case(same_stamps=True), "7 colour frame(s) with a stamp not after the previous"),
+    ],
+    ids=["nan-depth", "same-stamps"],
+)
+def test_every_stage_runs_on_odd_data_and_the_rrd_says_why(
+    case: Case, warning: str, tmp_path: Path
+) -> None:
+    from helpers_viz import read_rrd
+
+    path = write_case(tmp_path / "odd.mcap", case)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    texts = [str(t) for t in read_rrd(out / outputs.RRD).column("/logs", "TextLog:text")]
+    assert any(warning in t for t in texts), texts
+    assert any(warning in w for w in json.loads((out / outputs.METRICS).read_text())["warnings"])
