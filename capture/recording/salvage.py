@@ -17,12 +17,10 @@ import mmap
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
-import lz4.frame
-import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
@@ -31,7 +29,6 @@ from mcap.records import (
     AttachmentIndex,
     Channel,
     ChunkIndex,
-    Message,
     MessageIndex,
     Metadata,
     MetadataIndex,
@@ -39,35 +36,25 @@ from mcap.records import (
     Statistics,
 )
 
+from capture.recording.mcap_records import (
+    DECODE_ERRORS,
+    HEAD,
+    MAGIC,
+    NAME_AT,
+    RESYNC,
+    Damage,
+    DamagedError,
+    RawMessage,
+    chunk_payload,
+    inner_records,
+    message_key,
+    read_message,
+    reason_of,
+)
+
 logger = logging.getLogger(__name__)
 
-MAGIC: Final = b"\x89MCAP0\r\n"
-MAX_CHUNK_BYTES: Final = 1 << 31  # a chunk that claims more is damaged (ours are 64 MiB)
-# Third-party decoders of untrusted bytes (zstandard, lz4, mcap's record parsers) raise errors
-# with no common base (ZstdError, RuntimeError, UnicodeDecodeError, struct.error, ...): every
-# one of them means "this chunk or record is damaged", which is skipped and counted.
-DECODE_ERRORS: Final = (Exception,)
-_HEAD: Final = struct.Struct("<BQ")
-_MESSAGE_FIXED: Final = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
-_CHUNK_FIXED: Final = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, name length
-_RESYNC: Final = (b"\x04\x00\x00\x00zstd", b"\x03\x00\x00\x00lz4")  # compression names
-_NAME_AT: Final = 9 + 8 + 8 + 8 + 4  # offset of the compression name's length in a chunk
-
-
-class DamagedError(Exception):
-    """A chunk or record that cannot be read (internal: always caught and counted)."""
-
-
-@dataclass(frozen=True, slots=True)
-class RawMessage:
-    """A message record: its header and, when it was asked for, its payload."""
-
-    channel_id: int
-    sequence: int
-    log_time: int
-    publish_time: int
-    size: int  # of the payload in the file
-    data: bytes  # the payload, or b"" when only counted
+__all__ = ["DECODE_ERRORS", "MAGIC", "ChunkInfo", "Damage", "McapSalvage", "RawMessage"]
 
 
 @dataclass(slots=True)
@@ -77,30 +64,6 @@ class ChunkInfo:
     offset: int
     start_ns: int
     end_ns: int
-
-
-@dataclass(slots=True)
-class Damage:
-    """What a walk could not read."""
-
-    chunks_lost: int = 0
-    lost_by_channel: dict[int, int] = field(default_factory=dict)  # where the file says
-    records_skipped: int = 0
-    bytes_skipped: int = 0
-    truncated: bool = False  # the file ends inside a record
-    reasons: list[str] = field(default_factory=list)  # the first few, for the log
-
-    def note(self, reason: str) -> None:
-        """Remember a reason (the first five)."""
-        if len(self.reasons) < 5:
-            self.reasons.append(reason)
-
-    @property
-    def any(self) -> bool:
-        """Return whether anything was lost."""
-        return bool(
-            self.chunks_lost or self.records_skipped or self.bytes_skipped or self.lost_by_channel
-        )
 
 
 class McapSalvage:
@@ -192,9 +155,9 @@ class McapSalvage:
         buf, size = self._buf, len(self._buf)
         if from_index and not self._plausible(pos):
             return  # a stale or damaged index entry: the linear walk covers the data
-        while pos + _HEAD.size <= size:
-            opcode, length = _HEAD.unpack_from(buf, pos)
-            end = pos + _HEAD.size + length
+        while pos + HEAD.size <= size:
+            opcode, length = HEAD.unpack_from(buf, pos)
+            end = pos + HEAD.size + length
             if not 1 <= opcode <= 0x0F or end > size:
                 nxt = self._next_chunk(pos + 1)
                 self.damage.truncated = self.damage.truncated or nxt is None
@@ -222,38 +185,38 @@ class McapSalvage:
                 pos = nxt
 
     def _plausible(self, pos: int) -> bool:
-        if pos + _HEAD.size > len(self._buf):
+        if pos + HEAD.size > len(self._buf):
             return pos == len(self._buf)
-        opcode, length = _HEAD.unpack_from(self._buf, pos)
-        return bool(1 <= opcode <= 0x0F and pos + _HEAD.size + length <= len(self._buf))
+        opcode, length = HEAD.unpack_from(self._buf, pos)
+        return bool(1 <= opcode <= 0x0F and pos + HEAD.size + length <= len(self._buf))
 
     def _next_chunk(self, pos: int) -> int | None:
         """Return the offset of the next plausible compressed chunk header at or after pos."""
         best: int | None = None
-        for name in _RESYNC:
-            at = self._buf.find(name, pos + _NAME_AT - 1)
+        for name in RESYNC:
+            at = self._buf.find(name, pos + NAME_AT - 1)
             while at >= 0:
-                start = at - _NAME_AT
+                start = at - NAME_AT
                 if start >= pos and self._plausible_chunk(start):
                     break
                 at = self._buf.find(name, at + 1)
-            if at >= 0 and (best is None or at - _NAME_AT < best):
-                best = at - _NAME_AT
+            if at >= 0 and (best is None or at - NAME_AT < best):
+                best = at - NAME_AT
         return best
 
     def _plausible_chunk(self, pos: int) -> bool:
-        opcode, length = _HEAD.unpack_from(self._buf, pos)
-        return bool(opcode == Opcode.CHUNK and pos + _HEAD.size + length <= len(self._buf))
+        opcode, length = HEAD.unpack_from(self._buf, pos)
+        return bool(opcode == Opcode.CHUNK and pos + HEAD.size + length <= len(self._buf))
 
     def _footer_summary_start(self) -> int | None:
         size = len(self._buf)
-        footer = size - len(MAGIC) - _HEAD.size - 20
+        footer = size - len(MAGIC) - HEAD.size - 20
         if footer < len(MAGIC) or bytes(self._buf[size - len(MAGIC) :]) != MAGIC:
             return None
-        opcode, length = _HEAD.unpack_from(self._buf, footer)
+        opcode, length = HEAD.unpack_from(self._buf, footer)
         if opcode != Opcode.FOOTER or length != 20:
             return None
-        start: int = struct.unpack_from("<Q", self._buf, footer + _HEAD.size)[0]
+        start: int = struct.unpack_from("<Q", self._buf, footer + HEAD.size)[0]
         return start if len(MAGIC) <= start < footer else None
 
     def _record(self, opcode: int, pos: int, end: int) -> bool:
@@ -261,14 +224,14 @@ class McapSalvage:
         try:
             if opcode == Opcode.CHUNK:
                 return self._chunk(pos)
-            body = ReadDataStream(io.BytesIO(self._buf[pos + _HEAD.size : end]))
-            length = end - pos - _HEAD.size
+            body = ReadDataStream(io.BytesIO(self._buf[pos + HEAD.size : end]))
+            length = end - pos - HEAD.size
             if opcode == Opcode.SCHEMA:
                 self._add_schema(Schema.read(body))
             elif opcode == Opcode.CHANNEL:
                 self._add_channel(Channel.read(body))
             elif opcode == Opcode.MESSAGE:
-                msg = _message(body, length)
+                msg = read_message(body, length)
                 if self._first(msg):
                     self.loose.append((msg.log_time, pos))
             elif opcode == Opcode.MESSAGE_INDEX and self._last_chunk_lost:
@@ -284,7 +247,7 @@ class McapSalvage:
                 self._summary_record(opcode, body)
         except DECODE_ERRORS as err:
             self.damage.records_skipped += 1
-            self.damage.note(f"record {opcode:#04x} at offset {pos}: {_reason(err)}")
+            self.damage.note(f"record {opcode:#04x} at offset {pos}: {reason_of(err)}")
             return False
         return True
 
@@ -306,14 +269,14 @@ class McapSalvage:
                 self.attachments.setdefault(entry.name, entry.offset)
 
     def _walk_one(self, pos: int) -> None:
-        opcode, length = _HEAD.unpack_from(self._buf, pos)
-        end = pos + _HEAD.size + length
+        opcode, length = HEAD.unpack_from(self._buf, pos)
+        end = pos + HEAD.size + length
         if 1 <= opcode <= 0x0F and end <= len(self._buf):
             self._seen.add(pos)
             self._record(opcode, pos, end)
 
     def _in_file(self, offset: int) -> bool:
-        return len(MAGIC) <= offset <= len(self._buf) - _HEAD.size
+        return len(MAGIC) <= offset <= len(self._buf) - HEAD.size
 
     def _add_schema(self, schema: Schema) -> None:
         self.schemas.setdefault(schema.id, schema)
@@ -324,11 +287,11 @@ class McapSalvage:
     # -- chunks ------------------------------------------------------------------------------
     def _chunk(self, pos: int) -> bool:
         try:
-            records = _inner_records(self.chunk_data(pos), wanted=None)
+            records = inner_records(self.chunk_data(pos), wanted=None)
         except DECODE_ERRORS as err:
             self._last_chunk_lost = True
             self.damage.chunks_lost += 1
-            self.damage.note(f"chunk at offset {pos}: {_reason(err)}")
+            self.damage.note(f"chunk at offset {pos}: {reason_of(err)}")
             return False
         self._last_chunk_lost = False
         times = []
@@ -345,7 +308,7 @@ class McapSalvage:
 
     def _first(self, msg: RawMessage) -> bool:
         """Count a message unless it repeats one already seen (a duplicated chunk or record)."""
-        key = _key(msg)
+        key = message_key(msg)
         if key in self._keys:
             self.duplicates += 1
             return False
@@ -355,25 +318,11 @@ class McapSalvage:
 
     def chunk_records(self, pos: int) -> list[Schema | Channel | RawMessage]:
         """Return the schemas, channels and messages of the chunk at pos; raise if damaged."""
-        return _inner_records(self.chunk_data(pos), wanted=set(self.channels) | {-1})
+        return inner_records(self.chunk_data(pos), wanted=set(self.channels) | {-1})
 
     def chunk_data(self, pos: int) -> bytes:
         """Return the decompressed, CRC-checked records of the chunk at pos; raise if damaged."""
-        buf = self._buf
-        opcode, length = _HEAD.unpack_from(buf, pos)
-        end = pos + _HEAD.size + length
-        _, _, size, crc, name_len = _CHUNK_FIXED.unpack_from(buf, pos + _HEAD.size)
-        if opcode != Opcode.CHUNK or end > len(buf) or name_len > 16 or size > MAX_CHUNK_BYTES:
-            raise DamagedError(f"implausible chunk header (size {size}, name length {name_len})")
-        name = bytes(buf[pos + _NAME_AT + 4 : pos + _NAME_AT + 4 + name_len]).decode("ascii")
-        data_at = pos + _NAME_AT + 4 + name_len + 8
-        (data_len,) = struct.unpack_from("<Q", buf, data_at - 8)
-        if data_at + data_len > end:
-            raise DamagedError(f"chunk data of {data_len} bytes runs past its record")
-        data = _decompress(name, bytes(buf[data_at : data_at + data_len]), size)
-        if crc and zlib.crc32(data) != crc:
-            raise DamagedError("chunk CRC mismatch")
-        return data
+        return chunk_payload(self._buf, pos)
 
     def messages(self, channel_ids: set[int]) -> Iterator[RawMessage]:
         """Yield the messages of these channels from the intact data, in log-time order.
@@ -391,8 +340,8 @@ class McapSalvage:
         while i < len(units) or heap:
             while i < len(units) and (not heap or units[i][0] <= heap[0][0]):
                 for msg in self._unit(units[i][1], chunk=units[i][2], wanted=channel_ids):
-                    if msg.channel_id in channel_ids and _key(msg) not in keys:
-                        keys.add(_key(msg))  # duplicates were counted by the scan
+                    if msg.channel_id in channel_ids and message_key(msg) not in keys:
+                        keys.add(message_key(msg))  # duplicates were counted by the scan
                         heapq.heappush(heap, (msg.log_time, order, msg))
                         order += 1
                 i += 1
@@ -402,14 +351,14 @@ class McapSalvage:
     def _unit(self, pos: int, *, chunk: bool, wanted: set[int]) -> list[RawMessage]:
         try:
             if chunk:
-                records = _inner_records(self.chunk_data(pos), wanted=wanted)
+                records = inner_records(self.chunk_data(pos), wanted=wanted)
                 return [r for r in records if isinstance(r, RawMessage)]
-            _, length = _HEAD.unpack_from(self._buf, pos)
-            body = self._buf[pos + _HEAD.size : pos + _HEAD.size + length]
-            return [_message(ReadDataStream(io.BytesIO(body)), length)]
+            _, length = HEAD.unpack_from(self._buf, pos)
+            body = self._buf[pos + HEAD.size : pos + HEAD.size + length]
+            return [read_message(ReadDataStream(io.BytesIO(body)), length)]
         except DECODE_ERRORS as err:  # a chunk the summary vouched for (scan(verify=False))
             self.damage.chunks_lost += 1
-            self.damage.note(f"chunk at offset {pos}: {_reason(err)}")
+            self.damage.note(f"chunk at offset {pos}: {reason_of(err)}")
             return []
 
     def attachment(self, name: str) -> bytes | None:
@@ -418,14 +367,14 @@ class McapSalvage:
         if pos is None:
             return None
         try:
-            _, length = _HEAD.unpack_from(self._buf, pos)
-            body = self._buf[pos + _HEAD.size : pos + _HEAD.size + length]
+            _, length = HEAD.unpack_from(self._buf, pos)
+            body = self._buf[pos + HEAD.size : pos + HEAD.size + length]
             att = Attachment.read(ReadDataStream(io.BytesIO(body)))
             (crc,) = struct.unpack_from("<I", body, len(body) - 4)
             if crc and zlib.crc32(body[:-4]) != crc:
                 raise DamagedError("attachment CRC mismatch")
         except DECODE_ERRORS as err:
-            logger.warning("attachment %r is unreadable (%s): %s", name, _reason(err), self.path)
+            logger.warning("attachment %r is unreadable (%s): %s", name, reason_of(err), self.path)
             return None
         return att.data if att.name == name else None
 
@@ -446,63 +395,3 @@ class McapSalvage:
         }
         for cid, n in lost.items():
             self.damage.lost_by_channel[cid] = max(n, self.damage.lost_by_channel.get(cid, 0))
-
-
-def _decompress(name: str, data: bytes, size: int) -> bytes:
-    if name == "zstd":
-        declared = zstandard.frame_content_size(data)
-        if declared not in (-1, size):
-            raise DamagedError(f"zstd frame declares {declared} bytes, chunk header {size}")
-        out: bytes = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-    elif name == "lz4":
-        out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size)
-    elif name == "":
-        out = data
-    else:
-        raise DamagedError(f"unknown chunk compression {name!r}")
-    if len(out) != size:
-        raise DamagedError(f"chunk decompressed to {len(out)} bytes, header says {size}")
-    return out
-
-
-def _inner_records(data: bytes, *, wanted: set[int] | None) -> list[Schema | Channel | RawMessage]:
-    """Return a chunk's schemas, channels and messages (data only of the wanted channels)."""
-    records: list[Schema | Channel | RawMessage] = []
-    pos = 0
-    while pos < len(data):
-        if pos + _HEAD.size > len(data):
-            raise DamagedError("chunk ends inside a record header")
-        opcode, length = _HEAD.unpack_from(data, pos)
-        body_at, end = pos + _HEAD.size, pos + _HEAD.size + length
-        if end > len(data):
-            raise DamagedError("chunk record runs past the chunk")
-        if opcode == Opcode.MESSAGE:
-            if length < _MESSAGE_FIXED.size:
-                raise DamagedError(f"message record of {length} bytes (at least 22)")
-            channel, sequence, log_time, publish_time = _MESSAGE_FIXED.unpack_from(data, body_at)
-            size = length - _MESSAGE_FIXED.size
-            keep = wanted is not None and channel in wanted
-            payload = data[body_at + _MESSAGE_FIXED.size : end] if keep else b""
-            records.append(RawMessage(channel, sequence, log_time, publish_time, size, payload))
-        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
-            body = ReadDataStream(io.BytesIO(data[body_at:end]))
-            records.append(Schema.read(body) if opcode == Opcode.SCHEMA else Channel.read(body))
-        pos = end
-    return records
-
-
-def _message(body: ReadDataStream, length: int) -> RawMessage:
-    if length < _MESSAGE_FIXED.size:
-        raise DamagedError(f"message record of {length} bytes (at least 22)")
-    msg = Message.read(body, length)
-    size = length - _MESSAGE_FIXED.size
-    return RawMessage(msg.channel_id, msg.sequence, msg.log_time, msg.publish_time, size, msg.data)
-
-
-def _key(msg: RawMessage) -> tuple[int, int, int, int, int]:
-    return msg.channel_id, msg.log_time, msg.publish_time, msg.sequence, msg.size
-
-
-def _reason(err: BaseException) -> str:
-    text = str(err).splitlines()[0][:100] if str(err) else ""
-    return f"{type(err).__name__}: {text}" if text else type(err).__name__
