@@ -153,3 +153,33 @@ def test_prepare_out_refuses_a_folder_it_cannot_write(
     with pytest.raises(OutputError, match=r"cannot write into --out \(Permission denied"):
         outputs.prepare_out(tmp_path / "out", force=False)
     assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_a_sigkilled_runs_staging_folder_is_removed_by_the_next_run(
+    small: Path, tmp_path: Path
+) -> None:
+    import signal
+    import time
+
+    from helpers_robust import Case, write_case
+
+    longer = write_case(tmp_path / "longer.mcap", Case(size=(320, 240)))
+    out = tmp_path / "out"
+    child = subprocess.Popen(
+        [sys.executable, "-m", "process", "run", str(longer), "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    staging = out / f"{outputs.STAGING_PREFIX}{child.pid}"
+    deadline = time.monotonic() + 60
+    while not (staging / outputs.CONFIG).exists() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    child.send_signal(signal.SIGKILL)
+    child.wait(timeout=60)
+    if not staging.exists():
+        pytest.skip("the run finished before it could be killed")
+    assert (staging / outputs.CONFIG).exists()  # what a killed run leaves...
+    code, errors = _run(small, out, "--no-viz")
+    assert code == 0, errors  # ...is not "a non-empty --out"
+    assert not staging.exists()  # ...and the next run removes it
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
