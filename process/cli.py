@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import logging
 import signal
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import TYPE_CHECKING, Annotated, NoReturn
 
 import typer
+
+if TYPE_CHECKING:
+    import threading
+
+    from viz.rerun_log import LiveViewer
 
 app = typer.Typer(
     help="Replay an MCAP recording offline: odometry, segmentation, fusion, refinement.",
@@ -24,6 +30,8 @@ Examples:
   semreplay-process run rec.mcap --out out --stages odometry --no-viz
 
   semreplay-process run rec.mcap --out out --config samples/sample.toml --weights ckpt.pt
+
+  semreplay-process run field.mcap --out live --follow --serve   # while `record` writes it
 """
 
 
@@ -35,6 +43,18 @@ def _fail(message: str) -> NoReturn:
 def _interrupt(signum: int, frame: object) -> NoReturn:
     """Treat SIGTERM as Ctrl-C, so that a killed run cleans up the same way."""
     raise KeyboardInterrupt
+
+
+def _stop_following(stop: threading.Event) -> Callable[[int, object], None]:
+    """Return a SIGINT handler: the first Ctrl-C ends the capture here, the second aborts."""
+
+    def handler(signum: int, frame: object) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+        typer.echo("\nstopping: finishing with the frames so far (Ctrl-C again aborts)", err=True)
+
+    return handler
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -61,6 +81,24 @@ def run(
     force: Annotated[
         bool, typer.Option("--force", help="replace the outputs of an earlier run in --out")
     ] = False,
+    follow: Annotated[
+        bool,
+        typer.Option(
+            "--follow",
+            help="process a recording that is still being written, until the capture ends"
+            " (Ctrl-C: stop and finish with the frames so far)",
+        ),
+    ] = False,
+    follow_idle: Annotated[
+        float, typer.Option(min=0.5, help="--follow: seconds without new data that end a capture")
+    ] = 10.0,
+    serve: Annotated[
+        bool, typer.Option("--serve", help="also stream the log to viewers on 127.0.0.1:--port")
+    ] = False,
+    spawn: Annotated[
+        bool, typer.Option("--spawn", help="also stream the log to a native viewer it starts")
+    ] = False,
+    port: Annotated[int, typer.Option(min=1, max=65535, help="--serve/--spawn gRPC port")] = 9876,
     verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
 ) -> None:
     """Replay REC.mcap through the stages and write the outputs to --out."""
@@ -70,10 +108,28 @@ def run(
     _setup_logging(verbose)
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"{device!r}; valid: auto, cpu, cuda", param_hint="--device")
-    if not recording.is_file():
+    if not recording.is_file() and not follow:
         _fail(f"expected a recording file, found none (or a folder, pipe or device): {recording}")
+    if (serve or spawn) and no_viz:
+        raise typer.BadParameter(
+            "--serve/--spawn stream the log: drop --no-viz", param_hint="--no-viz"
+        )
+    from viz.rerun_log import LiveViewer
+
+    live = LiveViewer(spawn=spawn, port=port) if serve or spawn else None
     try:
-        _run(recording, out, config, stages, weights, device, no_viz, force)
+        _run(
+            recording,
+            out,
+            config,
+            stages,
+            weights,
+            device,
+            no_viz,
+            follow_idle_s=follow_idle if follow else None,
+            live=live,
+            force=force,
+        )
     except (ReplayError, CaptureError) as err:
         _fail(str(err))
 
@@ -86,8 +142,13 @@ def _run(
     weights: Path | None,
     device: str,
     no_viz: bool,
+    *,
+    follow_idle_s: float | None = None,
+    live: LiveViewer | None = None,
     force: bool = False,
 ) -> None:
+    import threading
+
     from rich.console import Console
 
     from process import outputs
@@ -100,7 +161,10 @@ def _run(
     stage_list = resolve_stages(stages)
     with outputs.staged(out, force=force) as staging:
         rrd = staging / outputs.RRD
-        viz = NullLogger() if no_viz else RerunLogger(rrd, recording_name=recording.stem)
+        viz = NullLogger() if no_viz else RerunLogger(rrd, recording_name=recording.stem, live=live)
+        if live is not None:
+            typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
+        stop = threading.Event()
         pipeline = ReplayPipeline(
             recording,
             out_dir=staging,
@@ -109,8 +173,13 @@ def _run(
             viz=viz,
             weights=weights,
             device=device,
+            follow_idle_s=follow_idle_s,
+            stop=stop,
         )
         signal.signal(signal.SIGTERM, _interrupt)
+        if follow_idle_s is not None:
+            signal.signal(signal.SIGINT, _stop_following(stop))
+            typer.echo(f"following {recording}: frames are processed as they are written", err=True)
         try:
             result = pipeline.run()
             outputs.close_logger(viz, quiet=False)

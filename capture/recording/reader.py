@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
 from capture.errors import RecordingError
 from capture.recording import messages as m
+from capture.recording.follow import GrowingFile, follow_records
 from capture.recording.frames import RgbdFrame
 from capture.recording.index import McapIndex, TopicInfo, damage_note, open_index
 from capture.recording.salvage import DECODE_ERRORS, McapSalvage
@@ -33,7 +37,10 @@ class RecordingReader:
 
     Usage: `with RecordingReader(path) as rec: for frame in rec.frames(): ...`.
     Recordings that were never finished (a killed writer) or are damaged replay every intact
-    chunk; what was lost or skipped is said once in the log and kept in `warnings`.
+    chunk; what was lost or skipped is said once in the log and kept in `warnings`. With
+    `follow_idle_s`, a recording still being written is followed: frames are yielded as the
+    writer's chunks arrive, until the writer finishes the file, stays idle for that many
+    seconds, or `stop` is set.
     """
 
     def __init__(
@@ -43,10 +50,14 @@ class RecordingReader:
         sync_tolerance_ns: int = 20_000_000,
         prefer_aligned: bool = True,
         verify: bool = False,
+        follow_idle_s: float | None = None,
+        stop: threading.Event | None = None,
     ) -> None:
         """Prepare to read path; verify=True checks every chunk at open() (exact counts)."""
         self.path = Path(path)
         self.verify = verify
+        self.follow_idle_s = follow_idle_s
+        self.stop = stop or threading.Event()
         self.sync_tolerance_ns = sync_tolerance_ns
         self.prefer_aligned = prefer_aligned
         self.unpaired_color_frames = 0
@@ -54,6 +65,7 @@ class RecordingReader:
         self._index = McapIndex()
         self._index_read = False
         self._salvage: McapSalvage | None = None
+        self._growing: GrowingFile | None = None  # the file, when following it
         self._decoders = DecoderFactory()
         self._undecodable = 0
 
@@ -72,9 +84,12 @@ class RecordingReader:
 
     def open(self) -> None:
         """Open the file, read its summary (or scan it if unfinished) and find its topics."""
+        self.warnings = []
+        if self.follow_idle_s is not None:
+            self._open_following(self.follow_idle_s)
+            return
         self._index, self._salvage = open_index(self.path, verify=self.verify)
         self._index_read = True
-        self.warnings = []
         note = damage_note(self._index, self.path)
         if note:
             self._warn(note)
@@ -84,11 +99,36 @@ class RecordingReader:
             self.close()
             raise
 
+    def _open_following(self, idle_s: float) -> None:
+        """Wait until the writer has written the topics a replay needs, then follow the file."""
+        last: RecordingError | None = None
+        deadline = time.monotonic() + idle_s
+        while time.monotonic() < deadline and not self.stop.is_set():
+            try:
+                self._index, self._salvage = open_index(self.path, verify=False)
+                self._index_read = True
+                self._topics = self._discover()
+                break
+            except (RecordingError, OSError) as err:
+                self.close()
+                last = err if isinstance(err, RecordingError) else RecordingError(str(err))
+                time.sleep(0.1)
+        else:
+            raise RecordingError(
+                f"followed the recording for {idle_s:g} s and found no complete frame topics"
+                f" ({last}); is the capture running?: {self.path}"
+            )
+        if not self.finished:
+            self._growing = GrowingFile(self.path, idle_s=idle_s, stop=self.stop)
+
     def close(self) -> None:
         """Close the file."""
         if self._salvage is not None:
             self._salvage.close()
             self._salvage = None
+        if self._growing is not None:
+            self._growing.close()
+            self._growing = None
 
     def _warn(self, text: str) -> None:
         if text in self.warnings:  # a second pass over the frames says nothing new
@@ -145,6 +185,11 @@ class RecordingReader:
         return Topics(color, color_info, depth, depth_info, use_aligned, extrinsics, metadata, gt)
 
     # -- properties --------------------------------------------------------------------------
+    @property
+    def following(self) -> bool:
+        """Return whether frames come from a recording that is still being written."""
+        return self._growing is not None
+
     @property
     def index(self) -> McapIndex | None:
         """Return what the walk of the file found, or None before open() read it.
@@ -232,6 +277,12 @@ class RecordingReader:
 
     def attachment(self, name: str) -> bytes | None:
         """Return the data of the named attachment, or None when absent or unreadable."""
+        if self.following:  # written at the end of the capture: look at the file as it is now
+            _, salvage = open_index(self.path, verify=False)
+            try:
+                return salvage.attachment(name)
+            finally:
+                salvage.close()
         return None if self._salvage is None else self._salvage.attachment(name)
 
     # -- frames ----------------------------------------------------------------------------
@@ -241,22 +292,48 @@ class RecordingReader:
             raise RecordingError(
                 f"recording is not open; use `with RecordingReader(path)`: {self.path}"
             )
-        wanted = set(topics)
-        ids = {cid for cid, c in self._salvage.channels.items() if c.topic in wanted}
         self._undecodable = 0
-        for record in self._salvage.messages(ids):
-            channel = self._salvage.channels[record.channel_id]
-            try:
-                schema = self._salvage.schemas.get(channel.schema_id)
-                decoder = self._decoders.decoder_for(channel.message_encoding, schema)
-                if decoder is None:
-                    raise RecordingError(f"no ROS 2 schema for '{channel.topic}'")
-                decoded = decoder(record.data)
-            except DECODE_ERRORS as err:  # corrupt CDR or schema: skip the message, count it
-                self._undecodable += 1
-                logger.debug("undecodable message on %s: %s", channel.topic, err)
-                continue
-            yield channel.topic, decoded, record.log_time
+        if self._growing is not None:
+            yield from self._followed_messages(set(topics), self._growing)
+            return
+        salvage = self._salvage
+        ids = {cid for cid, c in salvage.channels.items() if c.topic in set(topics)}
+        for record in salvage.messages(ids):
+            channel = salvage.channels[record.channel_id]
+            decoded = self._decode(channel, salvage.schemas.get(channel.schema_id), record.data)
+            if decoded is not None:
+                yield channel.topic, decoded, record.log_time
+
+    def _followed_messages(
+        self, wanted: set[str], growing: GrowingFile
+    ) -> Iterator[tuple[str, Any, int]]:
+        """Yield the messages of a file being written, in file order, as they arrive."""
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, Channel] = {}
+        for record in follow_records(growing, self.path):
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                channel = channels.get(record.channel_id)
+                if channel is None or channel.topic not in wanted:
+                    continue
+                decoded = self._decode(channel, schemas.get(channel.schema_id), record.data)
+                if decoded is not None:
+                    yield channel.topic, decoded, record.log_time
+
+    def _decode(self, channel: Channel, schema: Schema | None, data: bytes) -> Any:
+        """Return a decoded message, or None (counted) when its schema or bytes are corrupt."""
+        try:
+            decoder = self._decoders.decoder_for(channel.message_encoding, schema)
+            if decoder is None:
+                raise RecordingError(f"no ROS 2 schema for '{channel.topic}'")
+            return decoder(data)
+        except DECODE_ERRORS as err:
+            self._undecodable += 1
+            logger.debug("undecodable message on %s: %s", channel.topic, err)
+            return None
 
     def frames(
         self, *, start_ns: int | None = None, end_ns: int | None = None
@@ -293,6 +370,9 @@ class RecordingReader:
                 f"{sync.unpaired} colour frame(s) had no depth within "
                 f"{self.sync_tolerance_ns / 1e6:.0f} ms and were skipped: {self.path}"
             )
+        if self.following:  # the writer may have finished: read what the file says now
+            self._index, salvage = open_index(self.path, verify=False)
+            salvage.close()
         if not self.finished:
             self._warn(
                 f"recording was not finished (writer killed?); recovered {emitted} frames: "
