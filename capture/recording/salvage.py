@@ -122,6 +122,8 @@ class McapSalvage:
     def _from_summary(self) -> bool:
         """Take the index from an intact summary; return False (and change nothing) if none."""
         try:
+            if not self._summary_crc_ok():
+                return False
             with self.path.open("rb") as f:
                 summary = SeekingReader(f).get_summary()
             if summary is None or summary.statistics is None:
@@ -149,6 +151,15 @@ class McapSalvage:
                 self.attachments.setdefault(att.name, att.offset)
         self._times()
         return True
+
+    def _summary_crc_ok(self) -> bool:
+        """Return whether the footer's CRC (if any) matches the summary section it covers."""
+        start = self._footer_summary_start()
+        if start is None:
+            return False
+        footer = len(self._buf) - len(MAGIC) - HEAD.size - 20
+        (crc,) = struct.unpack_from("<I", self._buf, footer + HEAD.size + 16)
+        return bool(crc == 0 or zlib.crc32(self._buf[start : footer + HEAD.size + 16]) == crc)
 
     def _walk(self, pos: int, *, from_index: bool = False) -> None:
         """Walk records from pos; from_index: pos came from the summary, trust it less."""

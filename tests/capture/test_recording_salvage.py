@@ -204,3 +204,17 @@ def test_a_corrupt_chunk_behind_an_intact_summary_is_found_while_replaying(
     info = describe(path)  # info checks every chunk
     assert info.frames == len(stamps)
     assert "1 damaged chunk(s) skipped" in info.damage
+
+
+def test_a_damaged_summary_is_not_trusted(base: bytes, tmp_path: Path) -> None:
+    records = top_level_records(base)
+    stats = next(s for op, s, _ in records if op == 0x0B)  # the Statistics record
+    damaged = bytearray(base)
+    damaged[stats + 9 + 8] ^= 0x40  # its schema count: the summary's CRC no longer matches
+    path = tmp_path / "summary.mcap"
+    path.write_bytes(bytes(damaged))
+    walker = McapSalvage(path)
+    assert not walker._summary_crc_ok()
+    walker.close()
+    stamps, _ = _replay(path)  # read by the walk instead, every frame intact
+    assert len(stamps) == FRAMES
