@@ -10,6 +10,7 @@ final poses from the keyframes the fusion kept on disk (process.fusion.keyframes
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 import threading
@@ -137,7 +138,8 @@ class ReplayPipeline:
 
     def _stop_threads(self, *, failed: bool) -> None:
         """Stop the keyframe and logging threads; after a failure, keep the first error."""
-        for stop in (self._keyframes.join, self.viz.close):
+        close_viz = functools.partial(outputs.close_logger, self.viz, quiet=False)  # OutputError
+        for stop in (self._keyframes.join, close_viz):
             try:
                 stop()
             except Exception:
