@@ -38,7 +38,7 @@ def refine_file(
         CloudError: a cloud file is missing, malformed or has no `label` field.
     """
     start = time.perf_counter()
-    cloud = read_cloud(cloud_path)
+    cloud = read_cloud(cloud_path, min_points=1)
     truth = read_cloud(gt_cloud) if gt_cloud is not None else None
     result = refine(cloud, cfg)
     out_dir.mkdir(parents=True, exist_ok=True)
