@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import stat
 import tomllib
 import types
 import typing
@@ -17,6 +18,7 @@ from process.refine import RefineConfig
 from process.segmentation.config import SegmentationConfig
 
 STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
+MAX_CONFIG_BYTES: Final = 1 << 20
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -74,14 +76,41 @@ def load_config(path: Path | None) -> ReplayConfig:
     """
     if path is None:
         return ReplayConfig()
+    text = _read_config_text(Path(path))
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"config file not found: {path}") from err
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"config is not valid TOML ({err}): {path}") from err
     cfg: ReplayConfig = _build(ReplayConfig, data, where="", path=Path(path))
     return cfg
+
+
+def _read_config_text(path: Path) -> str:
+    """Return a config file's text: a regular file, at most MAX_CONFIG_BYTES, UTF-8 (BOM or not)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError as err:
+        raise ConfigError(f"config file not found: {path}") from err
+    except OSError as err:
+        raise ConfigError(f"cannot read the config ({err.strerror}): {path}") from err
+    if not stat.S_ISREG(mode):
+        raise ConfigError(f"expected a TOML config file, found a folder, pipe or device: {path}")
+    try:
+        with path.open("rb") as f:
+            raw = f.read(MAX_CONFIG_BYTES + 1)
+    except OSError as err:
+        raise ConfigError(f"cannot read the config ({err.strerror}): {path}") from err
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(
+            f"config is larger than {MAX_CONFIG_BYTES // 1024} KiB; expected a small TOML file: "
+            f"{path}"
+        )
+    try:
+        return raw.decode("utf-8-sig")  # a BOM (Windows editors) is accepted
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"config is not UTF-8 text (byte {err.start}); save it as UTF-8 TOML: {path}"
+        ) from err
 
 
 def _build(cls: type[Any], data: dict[str, Any], *, where: str, path: Path) -> Any:

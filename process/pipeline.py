@@ -10,6 +10,7 @@ final poses from the keyframes the fusion kept on disk (process.fusion.keyframes
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 import threading
@@ -115,6 +116,8 @@ class ReplayPipeline:
             with reader as rec:
                 self._note_ground_truth(rec)
                 ground_truth = self._replay(rec)
+                for text in rec.warnings:  # already in the log
+                    self._warn(text, logged=True)
                 gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
             trajectory = self._finish_odometry(ground_truth)
             self._keyframes.join()
@@ -136,7 +139,8 @@ class ReplayPipeline:
 
     def _stop_threads(self, *, failed: bool) -> None:
         """Stop the keyframe and logging threads; after a failure, keep the first error."""
-        for stop in (self._keyframes.join, self.viz.close):
+        close_viz = functools.partial(outputs.close_logger, self.viz, quiet=False)  # OutputError
+        for stop in (self._keyframes.join, close_viz):
             try:
                 stop()
             except Exception:
@@ -304,8 +308,7 @@ class ReplayPipeline:
                 f" {self.cfg.fusion.min_depth_m:g}..{self.cfg.fusion.max_depth_m:g} m;"
                 " refinement is skipped (check [fusion] and the recording's depth)"
             )
-            self.viz.log_text(note, level="WARN")
-            logger.warning(note)
+            self._warn(note)
             return
         self._refine(cloud, gt_cloud, up=up)
 
@@ -377,6 +380,13 @@ class ReplayPipeline:
         seconds = self.clock.wall.get("odometry", 0.0) + self.clock.wall.get("depth", 0.0)
         if odo is not None:
             odo["fps"] = round(n / seconds, 2) if seconds > 0 else None
+
+    def _warn(self, text: str, *, logged: bool = False) -> None:
+        """Say a warning in the .rrd and metrics.json "warnings" (and the log unless it was)."""
+        self.viz.log_text(text, level="WARN")
+        if not logged:
+            logger.warning("%s", text)
+        self.result.metrics.setdefault("warnings", []).append(text)
 
     def _write_config(self) -> None:
         path = self.out_dir / outputs.CONFIG

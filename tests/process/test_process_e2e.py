@@ -53,7 +53,7 @@ def run_twice(sim_recording: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     first = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert first.exit_code == 0, first.output
     mtimes = {name: (out / name).stat().st_mtime_ns for name in OUTPUTS}
-    second = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
+    second = runner.invoke(app, ["run", str(sim_recording), "--out", str(out), "--force"])
     assert second.exit_code == 0, second.output
     return {"out": out, "mtimes": mtimes, "output": second.output}
 
@@ -194,7 +194,7 @@ def test_an_unfinished_recording_replays_its_recovered_frames(
     assert 10 <= frames <= 20  # all but the chunk still open when it was killed
 
 
-def test_ctrl_c_leaves_no_partial_file_and_says_what_was_written(
+def test_ctrl_c_leaves_no_file_and_says_so(
     sim_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     def interrupt(*_: object) -> None:
@@ -204,14 +204,14 @@ def test_ctrl_c_leaves_no_partial_file_and_says_what_was_written(
     out = tmp_path / "out"
     result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert result.exit_code == 1
-    assert "interrupted; complete files written: config.toml" in result.output
-    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+    assert f"interrupted; no output was written and {out} is as it was" in result.output
+    assert list(out.iterdir()) == []  # not even the staging folder
 
 
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["run", "absent.mcap", "--out", "o"], "error: recording not found: absent.mcap"),
+        (["run", "absent.mcap", "--out", "o"], "error: expected a recording file, found none"),
         (["run", "{nav2}", "--out", "o"], "error: no colour topic"),
         (["run", "{rec}", "--out", "o", "--stages", "slam"], "error: unknown stage(s) ['slam']"),
         (["run", "{rec}", "--out", "o", "--weights", "absent.pt"], "error: segmentation weights"),
@@ -317,7 +317,7 @@ def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(
     result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1] == "error: segmentation failed on purpose"
-    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+    assert list(out.iterdir()) == []
 
 
 def test_fusion_places_keyframes_at_their_final_poses(
@@ -357,13 +357,14 @@ def test_sigterm_is_handled_like_ctrl_c(sim_recording: Path, tmp_path: Path) -> 
         text=True,
     )
     deadline = time.monotonic() + 60
-    while not (out / outputs.CONFIG).exists() and time.monotonic() < deadline:
+    staged_config = out / f"{outputs.STAGING_PREFIX}{child.pid}" / outputs.CONFIG
+    while not staged_config.exists() and time.monotonic() < deadline:
         time.sleep(0.02)  # config.toml is written first: the run has started
     child.send_signal(signal.SIGTERM)
     _, err = child.communicate(timeout=60)
     assert child.returncode == 1, err
-    assert "error: interrupted; complete files written: config.toml" in err
-    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+    assert "error: interrupted; no output was written" in err
+    assert list(out.iterdir()) == []
 
 
 def test_an_empty_map_is_said_and_refinement_skipped(
