@@ -13,6 +13,8 @@ and on keyframes a label image and its confidence.
 Each is logged by default ([viz] compress = true, depth_every_n = 30) and at full fidelity
 (compress = false, depth_every_n = 1); full fidelity is also compared with plain Rerun logging
 (raw rr.Image, float32 rr.DepthImage).
+The whole `process run` on TUM fr1_rpy (694 frames, 167 keyframes, ~800 real keypoints a frame,
+the network's confidence, maps and plots) wrote 98.5 KB a frame by default (319 KB before).
 """
 
 from __future__ import annotations
