@@ -78,6 +78,9 @@ def run(
     weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
     device: Annotated[str, typer.Option(help="auto | cpu | cuda")] = "auto",
     no_viz: Annotated[bool, typer.Option("--no-viz", help="do not write recording.rrd")] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="replace the outputs of an earlier run in --out")
+    ] = False,
     follow: Annotated[
         bool,
         typer.Option(
@@ -106,7 +109,7 @@ def run(
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"{device!r}; valid: auto, cpu, cuda", param_hint="--device")
     if not recording.is_file() and not follow:
-        _fail(f"recording not found: {recording}")
+        _fail(f"expected a recording file, found none (or a folder, pipe or device): {recording}")
     if (serve or spawn) and no_viz:
         raise typer.BadParameter(
             "--serve/--spawn stream the log: drop --no-viz", param_hint="--no-viz"
@@ -125,6 +128,7 @@ def run(
             no_viz,
             follow_idle_s=follow_idle if follow else None,
             live=live,
+            force=force,
         )
     except (ReplayError, CaptureError) as err:
         _fail(str(err))
@@ -141,6 +145,7 @@ def _run(
     *,
     follow_idle_s: float | None = None,
     live: LiveViewer | None = None,
+    force: bool = False,
 ) -> None:
     import threading
 
@@ -154,50 +159,48 @@ def _run(
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)
-    out.mkdir(parents=True, exist_ok=True)
-    rrd = out / outputs.RRD
-    viz = (
-        NullLogger()
-        if no_viz
-        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem, live=live)
-    )
-    if live is not None:
-        typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
-    stop = threading.Event()
-    pipeline = ReplayPipeline(
-        recording,
-        out_dir=out,
-        cfg=cfg,
-        stages=stage_list,
-        viz=viz,
-        weights=weights,
-        device=device,
-        follow_idle_s=follow_idle_s,
-        stop=stop,
-    )
-    signal.signal(signal.SIGTERM, _interrupt)
-    if follow_idle_s is not None:
-        signal.signal(signal.SIGINT, _stop_following(stop))
-        typer.echo(f"following {recording}: frames are processed as they are written", err=True)
-    try:
-        result = pipeline.run()
-    except BaseException as err:
-        # Every output but the .rrd is written whole or not at all; drop the .rrd's temporary.
-        viz.close()
-        outputs.temporary_path(rrd).unlink(missing_ok=True)
-        if isinstance(err, KeyboardInterrupt):
-            done = ", ".join(p.name for p in pipeline.result.written) or "nothing"
-            _fail(f"interrupted; complete files written: {done}; no partial file was left in {out}")
-        raise
-    viz.close()
-    if not no_viz:
-        outputs.temporary_path(rrd).replace(rrd)
-        result.written.append(rrd)
+    with outputs.staged(out, force=force) as staging:
+        rrd = staging / outputs.RRD
+        viz = (
+            NullLogger()
+            if no_viz
+            else RerunLogger(
+                rrd, recording_name=recording.stem, live=live, **cfg.viz.logger_options()
+            )
+        )
+        if live is not None:
+            typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
+        stop = threading.Event()
+        pipeline = ReplayPipeline(
+            recording,
+            out_dir=staging,
+            cfg=cfg,
+            stages=stage_list,
+            viz=viz,
+            weights=weights,
+            device=device,
+            follow_idle_s=follow_idle_s,
+            stop=stop,
+        )
+        signal.signal(signal.SIGTERM, _interrupt)
+        if follow_idle_s is not None:
+            signal.signal(signal.SIGINT, _stop_following(stop))
+            typer.echo(f"following {recording}: frames are processed as they are written", err=True)
+        try:
+            result = pipeline.run()
+            outputs.close_logger(viz, quiet=False)
+        except BaseException as err:
+            outputs.close_logger(viz, quiet=True)  # the staging folder goes, whatever is in it
+            if isinstance(err, KeyboardInterrupt):
+                _fail(f"interrupted; no output was written and {out} is as it was")
+            raise
+        written = result.written + ([] if no_viz else [rrd])
+        result.written = outputs.commit(staging, out, written)
     console = Console(stderr=False)
     console.print(outputs.summary_table(result.metrics))
     console.print(f"outputs in {out}: " + ", ".join(sorted(p.name for p in result.written)))
     if not no_viz:
-        console.print(f"view: semreplay-view {rrd}")
+        console.print(f"view: semreplay-view {out / outputs.RRD}")
 
 
 @app.command(
@@ -211,6 +214,9 @@ def refine(
     ground_truth: Annotated[
         Path | None, typer.Option("--ground-truth", help="labelled ground-truth cloud for metrics")
     ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="replace the outputs of an earlier run in --out")
+    ] = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
 ) -> None:
     """Run the refinement alone (planes, SOR, adaptive DBSCAN, regrowth) on a labelled cloud."""
@@ -225,12 +231,13 @@ def refine(
         from process.refine.job import refine_file
 
         cfg = load_config(config)
-        out.mkdir(parents=True, exist_ok=True)
-        outputs.write_text_atomic(out / outputs.CONFIG, to_toml(cfg))
-        metrics = refine_file(cloud, out_dir=out, cfg=cfg.refine, gt_cloud=ground_truth)
-        Console().print(
-            outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
-        )
+        with outputs.staged(out, force=force) as staging:
+            metrics = refine_file(cloud, out_dir=staging, cfg=cfg.refine, gt_cloud=ground_truth)
+            outputs.write_text_atomic(staging / outputs.CONFIG, to_toml(cfg))
+            names = (outputs.MAP_REFINED, outputs.METRICS, outputs.CONFIG)
+            outputs.commit(staging, out, [staging / n for n in names])
+        table = outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
+        Console().print(table)
         typer.echo(f"outputs in {out}: {outputs.MAP_REFINED}, {outputs.METRICS}, {outputs.CONFIG}")
     except ReplayError as err:
         _fail(str(err))

@@ -1,0 +1,87 @@
+"""Regrowth: holes refill inside an object's box, nothing grows outside it, ties go nearer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers_refine import grid_patch
+
+from process.refine.regrowth import regrow
+
+
+def _box_surface(low: tuple[float, float, float], high: tuple[float, float, float]) -> np.ndarray:
+    """Return the top and four sides of an axis-aligned box on a 2 cm grid."""
+    (x0, y0, z0), (x1, y1, z1) = low, high
+    top = grid_patch((x0, x1), (y0, y1), z=z1)
+    sides = []
+    for y in (y0, y1 - 0.02):
+        side = grid_patch((x0, x1), (z0, z1))[:, [0, 2, 1]]
+        side[:, 1] = y
+        sides.append(side)
+    for x in (x0, x1 - 0.02):
+        side = grid_patch((y0, y1), (z0, z1))[:, [2, 0, 1]]
+        side[:, 0] = x
+        sides.append(side)
+    return np.concatenate([top, *sides])
+
+
+def test_a_missed_patch_inside_a_known_box_is_refilled_and_nothing_outside_it_grows() -> None:
+    box = _box_surface((0.0, 0.0, 0.0), (1.2, 0.6, 0.7))  # a table-like box
+    hole = np.linalg.norm(box[:, :2] - (0.6, 0.3), axis=1) < 0.2  # 40 cm missed on the top
+    hole &= box[:, 2] > 0.69
+    # unlabelled neighbour 4 cm beside the box (a bin): within r1 of the box, outside its extent
+    beside = grid_patch((1.24, 1.5), (0.0, 0.6), z=0.5)
+    points = np.concatenate([box, beside])
+    labels = np.r_[np.where(hole, 0, 4), np.zeros(len(beside))].astype(np.uint8)
+    clusters = np.r_[np.where(hole, 0, 1), np.zeros(len(beside))].astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.05})
+    assert hole.sum() > 250
+    assert (grown.labels[: len(box)] == 4).all()  # the whole hole came back, in waves
+    assert grown.waves >= 3
+    assert (grown.labels[len(box) :] == 0).all()  # r1 reaches it, but it is not in the table
+    assert grown.r2_m[1] == pytest.approx(np.linalg.norm(box.max(0) - box.min(0)) / 2, abs=1e-5)
+
+
+def test_pieces_of_one_object_share_its_box_and_r2() -> None:
+    left = grid_patch((0.0, 0.5), (0.0, 0.6))  # a table top split by a missed strip
+    right = grid_patch((0.7, 1.2), (0.0, 0.6))
+    strip = grid_patch((0.5, 0.7), (0.0, 0.6))
+    points = np.concatenate([left, right, strip])
+    labels = np.r_[np.full(len(left) + len(right), 4), np.zeros(len(strip))].astype(np.uint8)
+    clusters = np.r_[np.full(len(left), 1), np.full(len(right), 2), np.zeros(len(strip))]
+    grown = regrow(points, labels, clusters.astype(np.int32), r1_m={4: 0.03}, gap_m=0.25)
+    assert grown.objects[1] == grown.objects[2]
+    assert grown.r2_m[1] == grown.r2_m[2] == pytest.approx(np.hypot(1.18, 0.58) / 2, abs=1e-5)
+    assert (grown.labels[-len(strip) :] == 4).all()
+    apart = regrow(points, labels, clusters.astype(np.int32), r1_m={4: 0.03}, gap_m=0.1)
+    assert apart.objects[1] != apart.objects[2]  # 20 cm apart: two objects
+
+
+def test_a_gap_wider_than_r1_stops_the_growth() -> None:
+    body = grid_patch((0.0, 0.8), (0.0, 0.4))
+    island = grid_patch((0.86, 0.9), (0.1, 0.2))  # 6 cm from the body, inside r2
+    points = np.concatenate([body, island])
+    labels = np.r_[np.full(len(body), 4), np.zeros(len(island))].astype(np.uint8)
+    clusters = np.r_[np.ones(len(body)), np.zeros(len(island))].astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.03})
+    assert (grown.labels[len(body) :] == 0).all()
+
+
+def test_a_point_reached_by_two_clusters_goes_to_the_nearer_one() -> None:
+    left = grid_patch((0.0, 0.4), (0.0, 0.8))  # table up to x = 0.38, r2 ~ 0.43
+    right = grid_patch((0.5, 0.9), (0.0, 0.8))  # chair from x = 0.5
+    between = np.array([[0.41, 0.4, 0.0], [0.47, 0.4, 0.0]], np.float32)  # both within both r1
+    points = np.concatenate([left, right, between])
+    labels = np.r_[np.full(len(left), 4), np.full(len(right), 5), [0, 0]].astype(np.uint8)
+    clusters = np.r_[np.full(len(left), 1), np.full(len(right), 2), [0, 0]].astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.1, 5: 0.1})
+    assert list(grown.labels[-2:]) == [4, 5]
+    assert list(grown.clusters[-2:]) == [1, 2]
+
+
+def test_without_clusters_nothing_grows() -> None:
+    points = grid_patch((0.0, 0.2), (0.0, 0.2))
+    zeros = np.zeros(len(points), np.uint8)
+    grown = regrow(points, zeros, zeros.astype(np.int32), r1_m={})
+    assert len(grown.regrown) == 0
+    assert (grown.labels == 0).all()
