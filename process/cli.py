@@ -88,41 +88,83 @@ def _run(
 
     from process import outputs
     from process.config import load_config, resolve_stages
-    from process.pipeline import ReplayPipeline
-    from viz.rerun_log import NullLogger, RerunLogger
+    from process.job import run_recording
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)
-    out.mkdir(parents=True, exist_ok=True)
-    rrd = out / outputs.RRD
-    viz = (
-        NullLogger()
-        if no_viz
-        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem)
-    )
-    pipeline = ReplayPipeline(
-        recording, out_dir=out, cfg=cfg, stages=stage_list, viz=viz, weights=weights, device=device
-    )
     signal.signal(signal.SIGTERM, _interrupt)
-    try:
-        result = pipeline.run()
-    except BaseException as err:
-        # Every output but the .rrd is written whole or not at all; drop the .rrd's temporary.
-        viz.close()
-        outputs.temporary_path(rrd).unlink(missing_ok=True)
-        if isinstance(err, KeyboardInterrupt):
-            done = ", ".join(p.name for p in pipeline.result.written) or "nothing"
-            _fail(f"interrupted; complete files written: {done}; no partial file was left in {out}")
-        raise
-    viz.close()
-    if not no_viz:
-        outputs.temporary_path(rrd).replace(rrd)
-        result.written.append(rrd)
+    result = run_recording(
+        recording, out, cfg=cfg, stages=stage_list, weights=weights, device=device, no_viz=no_viz
+    )
     console = Console(stderr=False)
     console.print(outputs.summary_table(result.metrics))
     console.print(f"outputs in {out}: " + ", ".join(sorted(p.name for p in result.written)))
     if not no_viz:
-        console.print(f"view: semreplay-view {rrd}")
+        console.print(f"view: semreplay-view {out / outputs.RRD}")
+
+
+_EXAMPLES_BATCH = """
+Examples:
+
+  semreplay-process batch recordings/ --out runs
+
+  semreplay-process batch 'site_*/*.mcap' --out runs --jobs 2 --stages odometry
+
+  semreplay-process batch /shared/recs --out /shared/runs --executor ray --address auto
+"""
+
+
+@app.command(epilog=_EXAMPLES_BATCH)
+def batch(
+    recordings: Annotated[
+        list[str], typer.Argument(help="recordings (.mcap), folders of them, or globs")
+    ],
+    out: Annotated[Path, typer.Option("--out", help="output folder: OUT/<name>/ per recording")],
+    config: Annotated[Path | None, typer.Option(help="TOML config overriding the defaults")] = None,
+    jobs: Annotated[
+        int | None, typer.Option(help="local tasks at once [default: cores, as memory allows]")
+    ] = None,
+    executor: Annotated[str, typer.Option(help="local | ray")] = "local",
+    address: Annotated[
+        str | None, typer.Option(help="Ray cluster address, e.g. auto [default: a local one]")
+    ] = None,
+    stages: Annotated[str, typer.Option(help="as for run")] = "refinement",
+    weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
+    device: Annotated[str, typer.Option(help="auto | cpu | cuda")] = "auto",
+    no_viz: Annotated[bool, typer.Option("--no-viz", help="do not write recording.rrd")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
+) -> None:
+    """Process many recordings, one task each, as `run` would; summarise them in OUT/summary.*."""
+    from capture.errors import CaptureError
+    from process.errors import ReplayError
+
+    _setup_logging(verbose)
+    try:
+        from process.batch.runner import run_batch
+        from process.config import load_config, resolve_stages
+
+        signal.signal(signal.SIGTERM, _interrupt)
+        rows = run_batch(
+            recordings,
+            out,
+            cfg=load_config(config),
+            stages=resolve_stages(stages),
+            weights=weights,
+            device=device,
+            no_viz=no_viz,
+            jobs=jobs,
+            executor=executor,
+            address=address,
+        )
+    except (ReplayError, CaptureError) as err:
+        _fail(str(err))
+    failed = [r["name"] for r in rows if r["status"] != "ok"]
+    typer.echo(f"summary: {out / 'summary.html'} (and summary.csv, summary.parquet)")
+    if failed:
+        _fail(
+            f"{len(failed)} of {len(rows)} recordings failed ({', '.join(failed)}): the reasons"
+            f" are in {out / 'summary.csv'}; rerun the same command to retry them"
+        )
 
 
 @app.command(

@@ -21,3 +21,7 @@ class CloudError(ReplayError):
 
 class StageError(ReplayError):
     """A pipeline stage cannot run on the input it was given."""
+
+
+class RunInterruptedError(ReplayError):
+    """Ctrl-C (or SIGTERM) stopped a run; the message says which complete files it left."""

@@ -121,7 +121,9 @@ class ReplayPipeline:
             dynamic_ncols=True,
             disable=not self.progress,
         )
+        self._frames = 0  # counted here: a disabled tqdm (progress=False) does not count
         for frame in frames:
+            self._frames += 1
             if odometry is None:
                 odometry = Odometry(self.cfg.odometry, intrinsics=frame.color_intrinsics)
                 self.viz.log_calibration(frame.color_intrinsics)
@@ -146,7 +148,6 @@ class ReplayPipeline:
                 gt_poses.append((frame.stamp_ns, gt_pose))
             if segmenter is not None and track.is_keyframe:
                 self._keyframe(frame, segmenter)
-        self._frames = frames.n
         self._odometry = odometry
         trajectory = odometry.finish() if odometry is not None else []
         anchor = np.eye(4) if self._anchor is None else self._anchor

@@ -1,0 +1,65 @@
+"""One recording through the pipeline into one folder: what `run` and each batch task call."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from process import outputs
+from process.config import ReplayConfig
+from process.errors import RunInterruptedError
+from process.pipeline import ReplayPipeline, RunResult
+
+
+def run_recording(
+    recording: Path,
+    out: Path,
+    *,
+    cfg: ReplayConfig,
+    stages: tuple[str, ...],
+    weights: Path | None = None,
+    device: str = "auto",
+    no_viz: bool = False,
+    progress: bool = True,
+) -> RunResult:
+    """Replay `recording` through `stages` into `out`; every output is written whole or not at all.
+
+    Raises:
+        RunInterruptedError: Ctrl-C stopped the run; complete files stay, no partial one.
+        ReplayError, CaptureError: the recording, config or a stage failed (one-line message).
+    """
+    from viz.rerun_log import NullLogger, RerunLogger
+
+    out.mkdir(parents=True, exist_ok=True)
+    rrd = out / outputs.RRD
+    viz = (
+        NullLogger()
+        if no_viz
+        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem)
+    )
+    pipeline = ReplayPipeline(
+        recording,
+        out_dir=out,
+        cfg=cfg,
+        stages=stages,
+        viz=viz,
+        weights=weights,
+        device=device,
+        progress=progress,
+    )
+    try:
+        result = pipeline.run()
+    except BaseException as err:
+        # Every output but the .rrd is written whole or not at all; drop the .rrd's temporary.
+        viz.close()
+        outputs.temporary_path(rrd).unlink(missing_ok=True)
+        if isinstance(err, KeyboardInterrupt):
+            done = ", ".join(p.name for p in pipeline.result.written) or "nothing"
+            raise RunInterruptedError(
+                f"interrupted; complete files written: {done}; no partial file was left in {out}"
+            ) from err
+        raise
+    viz.close()
+    if not no_viz:
+        outputs.temporary_path(rrd).replace(rrd)
+        result.written.append(rrd)
+    return result
