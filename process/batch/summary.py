@@ -13,6 +13,7 @@ from process import outputs
 CSV: Final = "summary.csv"
 PARQUET: Final = "summary.parquet"
 PREVIEW: Final = "preview.png"  # written by `process run` where it makes one
+MARKER: Final = "batch.json"  # a folder's row, written last: the folder is complete
 STAGES: Final = ("depth", "odometry", "segmentation", "fusion", "refinement")
 PHASES: Final = ("I", "II", "III")
 
@@ -81,8 +82,8 @@ def ok_row(
 
 
 def with_output_names(row: dict[str, Any], out_dir: Path) -> dict[str, Any]:
-    """Fill `outputs` and `preview` from what out_dir holds now."""
-    names = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))
+    """Fill `outputs` (the files of `process run`) and `preview` from what out_dir holds now."""
+    names = sorted(p.name for p in out_dir.iterdir() if p.name != MARKER and p.name[0] != ".")
     preview = out_dir / PREVIEW
     return {**row, "outputs": ";".join(names), "preview": str(preview) if preview.is_file() else ""}
 
@@ -119,13 +120,13 @@ def _write_parquet(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 
 def read_csv(path: Path) -> list[dict[str, Any]]:
-    """Read summary.csv back with the column types (empty cells are None)."""
+    """Read summary.csv back with the column types (empty cells, text ones too, are None)."""
     with path.open(newline="", encoding="utf-8") as f:
         return [{k: _parse(v, COLUMNS[k]) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 def _parse(text: str, kind: type) -> Any:
-    if text == "" and kind is not str:
+    if text == "":
         return None
     if kind is bool:
         return text == "True"

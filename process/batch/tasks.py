@@ -26,7 +26,7 @@ from process.config import BatchConfig, ReplayConfig, to_toml
 from process.errors import ReplayError
 from process.job import run_recording
 
-MARKER: Final = "batch.json"
+MARKER: Final = summary.MARKER
 THREAD_VARS: Final = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
