@@ -26,7 +26,7 @@ STYLE: Final = """
 body { font-family: sans-serif; margin: 1.5em; }
 table { border-collapse: collapse; font-size: 12px; }
 td, th { border: 1px solid #ccc; padding: 2px 6px; text-align: right; white-space: nowrap; }
-td.text { text-align: left; } tr.failed { background: #fde2e2; }
+td.text { text-align: left; } tr.failed { background: #fde2e2; } .wide { overflow-x: auto; }
 .plots, .previews { display: flex; flex-wrap: wrap; gap: 1.5em; }
 figure { margin: 0; } figcaption { font-size: 12px; }
 img { max-width: 320px; border: 1px solid #ccc; }
@@ -37,9 +37,13 @@ svg text { font-size: 11px; font-family: sans-serif; }
 def write_html(out: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
     """Write DIR/summary.html for the rows (whole or not at all); return its path."""
     n_ok = sum(r["status"] == "ok" for r in rows)
+    n_reused = sum(bool(r.get("reused")) for r in rows)
     body = [
         f"<h1>semreplay batch: {n_ok} of {len(rows)} recordings ok</h1>",
-        _table(out, rows),
+        f"<p>{len(rows) - n_ok} failed, {n_reused} kept from an earlier run. The same table:"
+        f' <a href="{summary.CSV}">{summary.CSV}</a>, <a href="{summary.PARQUET}">'
+        f"{summary.PARQUET}</a>; each recording's files are in its folder (out_dir).</p>",
+        f'<div class="wide">{_table(out, rows)}</div>',
         "<h2>Figures across recordings</h2>",
         '<div class="plots">' + "".join(_plots(rows)) + "</div>",
         "<h2>Previews</h2>",

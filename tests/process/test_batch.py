@@ -283,3 +283,18 @@ def test_a_task_limits_its_threads() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     )
     assert result.stdout.split() == ["1", "1", "1"]
+
+
+def test_the_report_shows_each_preview(tmp_path: Path) -> None:
+    from process.batch.report import write_html
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / summary.PREVIEW).write_bytes(b"\x89PNG")
+    metrics = {"odometry": {"frames": 3, "keyframes": 2, "ate_rmse_m": 0.5}}
+    row = summary.ok_row("a", tmp_path / "a.mcap", metrics, tmp_path / "a")
+    rows = [summary.with_output_names(row, tmp_path / "a"), summary.empty_row("b", Path("b"))]
+    rows[1].update(status="failed", reason="broken")
+    page = write_html(tmp_path, rows).read_text()
+    assert '<img src="a/preview.png" alt="a">' in page
+    assert "1 of 2 recordings ok" in page and "ATE RMSE (m)" in page
+    assert 'width="190.0"' in page  # the one ATE bar spans the chart
