@@ -84,39 +84,54 @@ def process_one(task: Task) -> dict[str, Any]:
     limit_threads(task.threads)
     reset_peak_rss()
     t0 = time.perf_counter()
-    extra = {"host": socket.gethostname()}
+    host = socket.gethostname()
+    if task.final_dir.exists() and not (task.final_dir / MARKER).is_file():
+        reason = (
+            f"{task.final_dir} exists and was not written by batch (no {MARKER}); move it away"
+            " or choose another --out"
+        )
+        return summary.failed_row(task.name, task.recording, reason, host=host)
     shutil.rmtree(task.partial_dir, ignore_errors=True)
     try:
-        result = run_recording(
-            task.recording,
-            task.partial_dir,
-            cfg=task.cfg,
-            stages=task.stages,
-            weights=task.weights,
-            device=task.device,
-            no_viz=task.no_viz,
-            progress=False,
-        )
-        duration_s = recording_duration_s(task.recording)
-        row = summary.ok_row(
-            task.name, task.recording, result.metrics, task.final_dir, duration_s=duration_s
-        )
-        row.update(extra, wall_s=round(time.perf_counter() - t0, 3), peak_rss_gb=peak_rss_gb())
-        row = summary.with_output_names(row, task.partial_dir) | {"out_dir": str(task.final_dir)}
-        if row["preview"]:
-            row["preview"] = str(task.final_dir / summary.PREVIEW)
-        marker = {"fingerprint": task.fingerprint(), "row": row}
-        outputs.write_text_atomic(task.partial_dir / MARKER, json.dumps(marker, indent=2))
-        publish(task)
-        return row
+        return _run_and_publish(task, t0, host)
     except (ReplayError, CaptureError) as err:
         reason = str(err)
     except Exception as err:  # any other failure is this recording's, not the batch's
         reason = f"{type(err).__name__}: {err}"
     shutil.rmtree(task.partial_dir, ignore_errors=True)
-    return summary.failed_row(
-        task.name, task.recording, reason, wall_s=round(time.perf_counter() - t0, 3), **extra
+    wall_s = round(time.perf_counter() - t0, 3)
+    return summary.failed_row(task.name, task.recording, reason, wall_s=wall_s, host=host)
+
+
+def _run_and_publish(task: Task, t0: float, host: str) -> dict[str, Any]:
+    """Run the recording into the partial folder, write its row last, rename it into place."""
+    result = run_recording(
+        task.recording,
+        task.partial_dir,
+        cfg=task.cfg,
+        stages=task.stages,
+        weights=task.weights,
+        device=task.device,
+        no_viz=task.no_viz,
+        progress=False,
     )
+    row = summary.ok_row(
+        task.name,
+        task.recording,
+        result.metrics,
+        task.final_dir,
+        duration_s=recording_duration_s(task.recording),
+        host=host,
+        wall_s=round(time.perf_counter() - t0, 3),
+        peak_rss_gb=peak_rss_gb(),
+    )
+    row = summary.with_output_names(row, task.partial_dir)
+    if row["preview"]:
+        row["preview"] = str(task.final_dir / summary.PREVIEW)
+    marker = {"fingerprint": task.fingerprint(), "row": row}
+    outputs.write_text_atomic(task.partial_dir / MARKER, json.dumps(marker, indent=2))
+    publish(task)
+    return row
 
 
 def publish(task: Task) -> None:

@@ -298,3 +298,16 @@ def test_the_report_shows_each_preview(tmp_path: Path) -> None:
     assert '<img src="a/preview.png" alt="a">' in page
     assert "1 of 2 recordings ok" in page and "ATE RMSE (m)" in page
     assert 'width="190.0"' in page  # the one ATE bar spans the chart
+
+
+def test_a_folder_not_written_by_batch_is_left_alone(recordings: Path, tmp_path: Path) -> None:
+    mine = tmp_path / "sim1" / "notes.txt"
+    mine.parent.mkdir()
+    mine.write_text("mine")
+    result = runner.invoke(app, ["batch", str(recordings / "sim1.mcap"), "--out", str(tmp_path)])
+    assert result.exit_code == 1, result.output
+    reason = _rows(tmp_path)["sim1"]["reason"]
+    assert reason.endswith(
+        "was not written by batch (no batch.json); move it away or choose another --out"
+    )
+    assert [p.name for p in mine.parent.iterdir()] == ["notes.txt"]
