@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 from benchmarks.common import Row
 from capture.recording import Intrinsics, RecordingReader, RgbdFrame
 from process.depth import DepthConfig, DepthProcessor, register_depth
-from process.odometry import Odometry, OdometryConfig
+from process.odometry.odometry import Odometry, OdometryConfig
 from process.trajectory import ate_rmse, path_length
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

@@ -19,7 +19,7 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from benchmarks.common import Row, run_with_peak_rss
-from process.loop_closure import Edge, PoseGraph
+from process.odometry.pose_graph import Edge, PoseGraph
 
 AREA = "pose graph"
 SIDE_BY_SIDE = 1000

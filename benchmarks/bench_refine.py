@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import Row, best_of
+from benchmarks.synthetic_office import SyntheticScene, indoor_scene
 from process.cloud import LabelledCloud, read_cloud, write_ply
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
 from process.refine.dbscan import estimate_parameters
-from process.refine.synthetic import SyntheticScene, indoor_scene
-from process.refine_job import refine_file
+from process.refine.job import refine_file
 
 AREA = "refine"
 PAPER_T8 = "paper Table 8 (i7-4790): estimation + clustering, 209,294 points"

@@ -31,10 +31,10 @@ from mcap.writer import Writer as LibraryWriter
 from mcap_ros2._dynamic import serialize_dynamic
 
 from benchmarks.common import Row
-from capture import ros_msgs as m
-from capture.mcap_threaded import StreamFrame, ThreadedWriter
-from capture.mcap_writer import RecordingWriter, camera_info
+from capture.realsense.sink import StreamFrame, ThreadedWriter
 from capture.recording import Intrinsics
+from capture.recording import messages as m
+from capture.recording.writer import RecordingWriter, camera_info
 
 ICL = Path(__file__).resolve().parents[2] / "shared" / "data" / "icl_nuim"
 AREA = "capture"

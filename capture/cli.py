@@ -14,7 +14,7 @@ import typer
 from capture.errors import CaptureError
 
 if TYPE_CHECKING:
-    from capture.mcap_session import RecordStatus
+    from capture.realsense.session import RecordStatus
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -104,9 +104,9 @@ def record(
         --depth-height 480 --depth-fps 90 --compression lz4
     ```
     """
-    from capture.mcap_threaded import stop_on_signals
-    from capture.realsense import RecordConfig
-    from capture.realsense import record as record_camera
+    from capture.realsense.record import record as record_camera
+    from capture.realsense.session import RecordConfig
+    from capture.realsense.sink import stop_on_signals
 
     config = RecordConfig(
         width=width, height=height, fps=fps, depth_width=depth_width,
@@ -143,7 +143,7 @@ def convert(
     semreplay-capture convert room.db3 room.mcap
     ```
     """
-    from capture.realsense import convert as convert_file
+    from capture.realsense.record import convert as convert_file
 
     result = convert_file(src, out, compression=compression.value)
     written = ", ".join(f"{k} {v}" for k, v in result.frames_written.items())
@@ -204,6 +204,6 @@ def info(rec: Annotated[Path, typer.Argument(help="A recording (.mcap).")]) -> N
     semreplay-capture info room.mcap
     ```
     """
-    from capture.mcap_info import describe, format_info
+    from capture.recording.info import describe, format_info
 
     typer.echo(format_info(describe(rec)))

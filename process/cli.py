@@ -189,7 +189,7 @@ def refine(
 
         from process import outputs
         from process.config import load_config, to_toml
-        from process.refine_job import refine_file
+        from process.refine.job import refine_file
 
         cfg = load_config(config)
         out.mkdir(parents=True, exist_ok=True)

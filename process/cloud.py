@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,18 +11,13 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
-from capture.recording import NUM_LABELS
+from capture.errors import RecordingError
+from capture.recording import NUM_LABELS, ply
 from process.errors import CloudError
+from process.outputs import write_bytes_atomic
 
 logger = logging.getLogger(__name__)
 
-_PLY_TYPES: Final = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}  # fmt: skip
-_PLY_FORMATS: Final = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": "ascii"}
 _GREY: Final = 128  # colour of points whose file has none
 
 
@@ -80,19 +74,6 @@ class LabelledCloud:
         return LabelledCloud(self.points, self.colors, labels, clusters)
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write bytes to a temporary name beside `path`, then rename it into place."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_bytes(data)
-        tmp.replace(path)
-    except OSError as err:
-        tmp.unlink(missing_ok=True)
-        raise CloudError(
-            f"cannot write {path.name}: {err.strerror}; check the folder: {path}"
-        ) from err
-
-
 def ply_bytes(cloud: LabelledCloud) -> bytes:
     """Encode a cloud as binary little-endian PLY (x y z, red green blue, label, [cluster])."""
     fields: list[tuple[str, str]] = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
@@ -100,24 +81,17 @@ def ply_bytes(cloud: LabelledCloud) -> bytes:
     if cloud.clusters is not None:
         fields.append(("cluster", "<i4"))
     vertices = np.empty(len(cloud), dtype=fields)
-    for axis, name in enumerate("xyz"):
-        vertices[name] = cloud.points[:, axis]
-    for channel, name in enumerate(("red", "green", "blue")):
-        vertices[name] = cloud.colors[:, channel]
+    vertices["x"], vertices["y"], vertices["z"] = cloud.points.T
+    vertices["red"], vertices["green"], vertices["blue"] = cloud.colors.T
     vertices["label"] = cloud.labels
     if cloud.clusters is not None:
         vertices["cluster"] = cloud.clusters
-    names = {"<f4": "float", "u1": "uchar", "<i4": "int"}
-    header = ["ply", "format binary_little_endian 1.0", "comment semreplay labelled cloud"]
-    header.append(f"element vertex {len(cloud)}")
-    header += [f"property {names[dtype]} {name}" for name, dtype in fields]
-    header.append("end_header\n")
-    return "\n".join(header).encode("ascii") + vertices.tobytes()
+    return ply.encode(vertices, comment="semreplay labelled cloud")
 
 
 def write_ply(path: Path, cloud: LabelledCloud) -> None:
     """Write a cloud as binary little-endian PLY, atomically (temporary name, then rename)."""
-    write_atomic(path, ply_bytes(cloud))
+    write_bytes_atomic(path, ply_bytes(cloud))
 
 
 def read_cloud(path: Path, *, require_labels: bool = True) -> LabelledCloud:
@@ -145,77 +119,11 @@ def read_cloud(path: Path, *, require_labels: bool = True) -> LabelledCloud:
 
 def parse_ply(data: bytes, *, source: str, require_labels: bool = True) -> LabelledCloud:
     """Decode PLY bytes (ascii or binary; the vertex element) into a labelled cloud."""
-    end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
-        raise CloudError(
-            f"expected a PLY file ('ply' ... 'end_header'), found other bytes: {source}"
-        )
-    body = end + len(b"end_header")
-    body += 2 if data[body : body + 2] == b"\r\n" else 1
-    lines = data[:end].decode("ascii", errors="replace").splitlines()
-    fmt, elements = _ply_header(lines, source)
-    offset = body
-    for name, count, fields in elements:
-        dtype = np.dtype([(f, (fmt if fmt != "ascii" else "<") + t) for f, t in fields])
-        if name == "vertex":
-            if fmt == "ascii":
-                vertices = _ascii_vertices(data[offset:], count, dtype, source)
-            else:
-                if len(data) < offset + count * dtype.itemsize:
-                    raise CloudError(
-                        f"PLY says {count} vertices but the file ends early "
-                        f"({len(data) - offset} bytes of {count * dtype.itemsize}): {source}"
-                    )
-                vertices = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
-            return _cloud_from_fields(vertices, source, require_labels=require_labels)
-        if fmt == "ascii":
-            raise CloudError(
-                f"ascii PLY with element {name!r} before 'vertex' is not supported: {source}"
-            )
-        offset += count * dtype.itemsize
-    raise CloudError(f"expected a 'vertex' element in the PLY header, found none: {source}")
-
-
-def _ply_header(
-    lines: list[str], source: str
-) -> tuple[str, list[tuple[str, int, list[tuple[str, str]]]]]:
-    fmt = ""
-    elements: list[tuple[str, int, list[tuple[str, str]]]] = []
-    for line in lines[1:]:
-        words = line.split()
-        if not words or words[0] in ("comment", "obj_info"):
-            continue
-        if words[0] == "format" and len(words) >= 2 and words[1] in _PLY_FORMATS:
-            fmt = _PLY_FORMATS[words[1]]
-        elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
-            elements.append((words[1], int(words[2]), []))
-        elif words[0] == "property" and elements and len(words) == 3 and words[1] in _PLY_TYPES:
-            elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
-        else:
-            raise CloudError(
-                f"unsupported PLY header line {line.strip()!r} (list properties?): {source}"
-            )
-    if not fmt:
-        raise CloudError(f"expected a PLY 'format' line (ascii or binary), found none: {source}")
-    return fmt, elements
-
-
-def _ascii_vertices(
-    body: bytes, count: int, dtype: np.dtype[np.void], source: str
-) -> npt.NDArray[np.void]:
-    rows = body.split(b"\n", count)[:count]
     try:
-        table = np.array([r.split() for r in rows], dtype=np.float64)
-    except ValueError as err:
-        raise CloudError(
-            f"ascii PLY rows are not {len(dtype.names or ())} numbers each: {source}"
-        ) from err
-    if table.shape != (count, len(dtype.names or ())):
-        raise CloudError(f"ascii PLY says {count} vertices but has {len(rows)} rows: {source}")
-    out = np.empty(count, dtype=dtype)
-    for column, name in enumerate(dtype.names or ()):
-        out[name] = table[:, column]
-    return out
+        vertices = ply.decode(data, source=source)
+    except RecordingError as err:
+        raise CloudError(str(err)) from err
+    return _cloud_from_fields(vertices, source, require_labels=require_labels)
 
 
 def _cloud_from_fields(

@@ -26,6 +26,7 @@ import numpy.typing as npt
 
 from capture.recording import Intrinsics, RgbdFrame
 from process.errors import ConfigError, StageError
+from process.geometry import normalise
 
 DepthImage = npt.NDArray[np.float32]  # (H, W) metres, 0 = no depth
 
@@ -288,7 +289,7 @@ def _corner_directions(
         ).reshape(intr.height + 1, intr.width + 1, 2)
         x, y = und[..., 0], und[..., 1]
     else:
-        x, y = (u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy
+        x, y = np.moveaxis(normalise(np.stack([u, v], axis=-1), intr), -1, 0)
     rays = np.stack([x, y, np.ones_like(x)])  # (3, h+1, w+1)
     dirs = np.einsum("ij,jhw->ihw", np.array(rot).reshape(3, 3), rays).astype(np.float32)
     top_left = np.ascontiguousarray(dirs[:, :-1, :-1])

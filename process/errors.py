@@ -23,5 +23,9 @@ class StageError(ReplayError):
     """A pipeline stage cannot run on the input it was given."""
 
 
+class OutputError(ReplayError):
+    """An output file cannot be written (no space, no permission, not a folder)."""
+
+
 class RunInterruptedError(ReplayError):
     """Ctrl-C (or SIGTERM) stopped a run; the message says which complete files it left."""

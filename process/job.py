@@ -27,7 +27,8 @@ def run_recording(
         RunInterruptedError: Ctrl-C stopped the run; complete files stay, no partial one.
         ReplayError, CaptureError: the recording, config or a stage failed (one-line message).
     """
-    from viz.rerun_log import NullLogger, RerunLogger
+    from viz.logger import NullLogger
+    from viz.rerun_log import RerunLogger
 
     out.mkdir(parents=True, exist_ok=True)
     rrd = out / outputs.RRD

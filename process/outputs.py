@@ -12,6 +12,8 @@ from typing import Any, Final
 
 from rich.table import Table
 
+from process.errors import OutputError
+
 RRD: Final = "recording.rrd"
 MAP_FUSED: Final = "map_fused.ply"
 MAP_REFINED: Final = "map_refined.ply"
@@ -27,19 +29,36 @@ def temporary_path(path: Path) -> Path:
 
 @contextmanager
 def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path next to `path`; rename it into place only if the block succeeds."""
+    """Yield a temporary path next to `path`; rename it into place only if the block succeeds.
+
+    The project's one atomic writer: every output file goes through it.
+
+    Raises:
+        OutputError: the file could not be written or renamed (disk full, no permission).
+    """
     tmp = temporary_path(path)
     try:
         yield tmp
         tmp.replace(path)
+    except OSError as err:
+        raise OutputError(
+            f"cannot write {path.name} ({err.strerror or err}); check the folder's free space"
+            f" and permissions: {path}"
+        ) from err
     finally:
         tmp.unlink(missing_ok=True)
 
 
 def write_text_atomic(path: Path, text: str) -> None:
-    """Write text to `path` through a temporary file and a rename."""
+    """Write UTF-8 text to `path` through a temporary file and a rename."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write bytes to `path` through a temporary file and a rename."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def _finite(value: Any) -> Any:

@@ -24,8 +24,9 @@ from process import outputs
 from process.config import ReplayConfig, to_toml
 from process.depth import DepthProcessor
 from process.evaluate import class_counts, confusion_matrix, ratios
-from process.odometry import Odometry
+from process.odometry.odometry import Odometry
 from process.trajectory import ate_rmse, path_length, rpe, write_tum
+from viz.layout import STAGE_FUSED
 from viz.logger import Logger
 
 logger = logging.getLogger(__name__)
@@ -86,7 +87,7 @@ class ReplayPipeline:
             gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
         if "fusion" in self.stages:
             self._write_cloud(outputs.MAP_FUSED, cloud)
-            self.viz.set_stage(0)
+            self.viz.set_stage(STAGE_FUSED)
             self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
             if "refinement" in self.stages and len(cloud) == 0:
                 note = (
@@ -192,7 +193,7 @@ class ReplayPipeline:
         the keyframes' images until then would make memory grow with the recording, reading
         them again does not. Segmenting a keyframe again costs ~20 ms.
         """
-        from process.fusion import Fusion
+        from process.fusion.votes import Fusion
 
         fusion = Fusion(self.cfg.fusion)
         depth = DepthProcessor(self.cfg.depth)
@@ -255,7 +256,7 @@ class ReplayPipeline:
         self.result.written.append(path)
 
     def _refine(self, cloud: Any, gt_cloud_ply: bytes | None) -> None:
-        from process.refine_job import refine_and_log
+        from process.refine.job import refine_and_log
 
         t0 = time.perf_counter()
         refined, section = refine_and_log(

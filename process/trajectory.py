@@ -8,8 +8,6 @@ the estimate onto the ground truth, and RPE compares consecutive relative motion
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,6 +16,7 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from process.errors import ReplayError
+from process.outputs import write_text_atomic
 
 StampedPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]  # (N,) ns, (N, 4, 4)
 
@@ -37,15 +36,7 @@ def write_tum(
     lines = [
         _tum_line(int(s), np.asarray(p, np.float64)) for s, p in zip(stamps_ns, poses, strict=True)
     ]
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="ascii") as f:
-            f.write("# timestamp tx ty tz qx qy qz qw\n")
-            f.write("".join(lines))
-        Path(tmp).replace(path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, "# timestamp tx ty tz qx qy qz qw\n" + "".join(lines))
 
 
 def _tum_line(stamp_ns: int, pose: npt.NDArray[np.float64]) -> str:

@@ -2,7 +2,7 @@
 
 Run as a script (`python tests/helpers_capture.py MODE OUT`) it is the subprocess side:
 `kill-writer` writes 10 frames/s through RecordingWriter and prints each frame it wrote;
-`record-until-signal` runs `capture.realsense.record` over a software camera until SIGTERM.
+`record-until-signal` runs `capture.realsense.record.record` over a software camera until SIGTERM.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy.typing as npt
 import pyrealsense2 as rs
 from scipy.spatial.transform import Rotation
 
-from capture.frames import Extrinsics, Intrinsics
+from capture.recording.frames import Extrinsics, Intrinsics
 
 COLOR_W, COLOR_H = 96, 72
 DEPTH_W, DEPTH_H = 80, 60
@@ -207,8 +207,9 @@ def _kill_writer(out: Path) -> None:
 
 
 def _record_until_signal(out: Path) -> None:
-    from capture.mcap_threaded import stop_on_signals
-    from capture.realsense import RecordConfig, record
+    from capture.realsense.record import record
+    from capture.realsense.session import RecordConfig
+    from capture.realsense.sink import stop_on_signals
 
     cam = SoftCamera()
     started = threading.Event()

@@ -10,8 +10,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from capture.frames import RgbdFrame
 from capture.recording import RecordingReader
+from capture.recording.frames import RgbdFrame
 
 W, H = 640, 480
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from process.cloud import LabelledCloud
+from viz.logger import NullLogger
 
 
 def literal_dbscan(
@@ -105,14 +105,18 @@ def labelled(points: npt.NDArray[np.floating], labels: npt.ArrayLike) -> Labelle
     return LabelledCloud(pts, np.full((len(pts), 3), 128, np.uint8), lab)
 
 
-class RecordingLogger:
+class RecordingLogger(NullLogger):
     """A logger that records each call as (method, first argument, keyword arguments)."""
 
     def __init__(self) -> None:
         self.calls: list[tuple[str, object, dict[str, Any]]] = []
 
-    def __getattr__(self, method: str) -> Callable[..., None]:
+    def __getattribute__(self, method: str) -> Any:
+        if not method.startswith(("log_", "set_")):
+            return object.__getattribute__(self, method)
+        calls = object.__getattribute__(self, "calls")
+
         def record(first: object = None, *_: object, **kwargs: Any) -> None:
-            self.calls.append((method, first, kwargs))
+            calls.append((method, first, kwargs))
 
         return record

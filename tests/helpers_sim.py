@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from capture.frames import Intrinsics
+from capture.recording.frames import Intrinsics
 from capture.sim.placement import LoopPath, PlacedPart
 from capture.sim.scene import Scene
 from capture.sim.shapes import Mesh, box, plane_grid

@@ -1,14 +1,16 @@
-"""What the pipeline logs, one method per domain object: the `Logger` type and its do-nothing twin.
+"""What the pipeline logs, one method per domain object: the `Logger` protocol and `NullLogger`.
 
-The pipeline holds a `Logger`: a `viz.rerun_log.RerunLogger` normally, a `NullLogger` for
-`--no-viz`. Methods take numpy arrays, plain values or capture types, never `process` objects.
+Every logger is a `Logger`: `viz.rerun_log.RerunLogger` writes an `.rrd`, `NullLogger` does
+nothing (`--no-viz`), and the refinement takes the same type. Methods take numpy arrays, plain
+values or capture types, never `process` objects. Each method's body is the do-nothing default
+(kiss-icp's StubVisualizer pattern), so a logger implements only what it shows.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from types import TracebackType
-from typing import Literal, Self
+from typing import Literal, Protocol, Self
 
 import numpy as np
 import numpy.typing as npt
@@ -22,12 +24,8 @@ FloatArray = npt.NDArray[np.floating]
 IntArray = npt.NDArray[np.integer]
 
 
-class NullLogger:
-    """What the pipeline logs, one method per domain object; this twin does nothing (--no-viz).
-
-    `RerunLogger` overrides every method to write an `.rrd` (kiss-icp's StubVisualizer pattern):
-    a method added here without an override logs nothing rather than failing.
-    """
+class Logger(Protocol):
+    """What the pipeline and the refinement log, one method per domain object."""
 
     def __enter__(self) -> Self:
         return self
@@ -42,21 +40,27 @@ class NullLogger:
 
     def set_frame(self, index: int, *, stamp_ns: int) -> None:
         """Set the `frame` and `capture_time` timelines for what follows."""
+        return None
 
     def set_stage(self, step: int) -> None:
         """Set the `stage` timeline (layout.STAGE_*) for what follows."""
+        return None
 
     def log_calibration(self, color_intrinsics: Intrinsics) -> None:
         """Log the colour camera's pinhole, once, static."""
+        return None
 
     def log_frame(self, frame: RgbdFrame) -> None:
         """Log a frame's colour (JPEG) and raw depth."""
+        return None
 
     def log_registered_depth(self, depth_m: FloatArray) -> None:
         """Log depth registered to the colour camera, in metres."""
+        return None
 
     def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
         """Log the camera pose of the current frame and mark keyframes."""
+        return None
 
     def log_keypoints(
         self,
@@ -66,23 +70,29 @@ class NullLogger:
         matched_xy: FloatArray | None = None,
     ) -> None:
         """Log keypoints in colour pixels, inliers green; optionally their matched pixels."""
+        return None
 
     def log_tracking(self, n_inliers: int, *, status: str, event: str | None = None) -> None:
         """Log the tracking inlier count, the status when it changes, and an event."""
+        return None
 
     def log_trajectory(
         self, kind: TrajectoryKind, stamps_ns: IntArray, positions: FloatArray
     ) -> None:
         """Log a whole trajectory (estimated or ground truth)."""
+        return None
 
     def log_segmentation(self, labels: IntArray, *, confidence: FloatArray | None = None) -> None:
         """Log a label image (RECORDING.md ids) and its per-pixel confidence in [0, 1]."""
+        return None
 
     def log_timing(self, stage: str, seconds: float) -> None:
         """Log the time a stage took, in seconds."""
+        return None
 
     def log_text(self, message: str, *, level: str = "INFO") -> None:
         """Log a line of text at a level (TRACE, DEBUG, INFO, WARN, ERROR, CRITICAL)."""
+        return None
 
     def log_map(
         self,
@@ -93,6 +103,7 @@ class NullLogger:
         labels: IntArray | None = None,
     ) -> None:
         """Log a labelled point map (fused or refined)."""
+        return None
 
     def log_refine(
         self,
@@ -103,6 +114,7 @@ class NullLogger:
         clusters: IntArray | None = None,
     ) -> None:
         """Log the points of one refinement step, coloured by cluster where given."""
+        return None
 
     def log_dbscan_curves(
         self,
@@ -115,12 +127,16 @@ class NullLogger:
         chosen_k: int,
     ) -> None:
         """Log the adaptive-DBSCAN curves over K of one class and mark the chosen K."""
+        return None
 
     def log_metrics(self, section: str, values: Mapping[str, float]) -> None:
         """Log named scalar metrics of one section."""
+        return None
 
     def close(self) -> None:
         """Flush and finish the output."""
+        return None
 
 
-Logger = NullLogger  # the type the pipeline holds: a RerunLogger or its do-nothing twin
+class NullLogger(Logger):
+    """A `Logger` that logs nothing (`--no-viz`)."""

@@ -1,7 +1,7 @@
 """A `Logger` that writes an `.rrd` with our blueprint, one method per domain object.
 
-`RerunLogger` hands arrays to Rerun without Python loops; `make_logger` picks it or its
-do-nothing twin `NullLogger` (viz.logger).
+`RerunLogger` hands arrays to Rerun without Python loops; `viz.logger.NullLogger` is its
+do-nothing twin for `--no-viz`.
 """
 
 from __future__ import annotations
@@ -20,24 +20,11 @@ from viz import layout, rerun_arrays
 from viz.logger import (
     FloatArray,
     IntArray,
-    Logger,
     MapKind,
     NullLogger,
     RefineKind,
     TrajectoryKind,
 )
-
-__all__ = [
-    "FloatArray",
-    "IntArray",
-    "Logger",
-    "MapKind",
-    "NullLogger",
-    "RefineKind",
-    "RerunLogger",
-    "TrajectoryKind",
-    "make_logger",
-]
 
 _POINT_RADIUS: Final = rr.Radius.ui_points(1.5)
 _PALETTE: Final = layout.cluster_palette()
@@ -276,10 +263,3 @@ class RerunLogger(NullLogger):
         """Send a whole curve as scalars over the `dbscan_k` timeline in one call."""
         index = rr.TimeColumn(layout.TIMELINE_DBSCAN_K, sequence=ks)
         self._rec.send_columns(path, indexes=[index], columns=rr.Scalars.columns(scalars=values))
-
-
-def make_logger(rrd_path: Path | None, *, recording_name: str) -> RerunLogger | NullLogger:
-    """Return a RerunLogger writing rrd_path, or a NullLogger when rrd_path is None."""
-    if rrd_path is None:
-        return NullLogger()
-    return RerunLogger(rrd_path, recording_name=recording_name)

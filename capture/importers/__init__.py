@@ -19,7 +19,6 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from datetime import UTC, datetime
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Final
 
@@ -28,7 +27,6 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.errors import ImportFormatError
-from capture.frames import Intrinsics
 from capture.importers.common import FPS_WITHOUT_STAMPS, _Dataset, detect_kind
 from capture.importers.redwood import PRIMESENSE_K, SLAMBOOK_K, _load_redwood
 from capture.importers.seven_scenes import SEVEN_SCENES_INVALID_DEPTH, SEVEN_SCENES_K, _load_7scenes
@@ -39,7 +37,8 @@ from capture.importers.tum import (
     _load_tum,
     associate,
 )
-from capture.mcap_writer import RecordingWriter
+from capture.recording.frames import Intrinsics
+from capture.recording.writer import RecordingWriter, capture_record
 
 __all__ = [
     "FPS_WITHOUT_STAMPS",
@@ -119,24 +118,17 @@ def _write(dataset: _Dataset, part: Path, *, kind: str, src: Path, compression: 
                 poses += 1
         n = len(dataset.frames)
         writer.finish(
-            {
-                "tool": "semreplay-capture import",
-                "version": _version(),
-                "kind": kind,
-                "layout": dataset.layout,
-                "source": str(src.resolve()),
-                "start_time": started,
-                "frames_written": {"color": n, "depth": n, "ground_truth_pose": poses},
-                "frames_dropped": {"color": dataset.dropped},
-            }
+            capture_record(
+                "semreplay-capture import",
+                source=str(src.resolve()),
+                config={"compression": compression},
+                start_time=started,
+                kind=kind,
+                layout=dataset.layout,
+                frames_written={"color": n, "depth": n, "ground_truth_pose": poses},
+                frames_dropped={"color": dataset.dropped},
+            )
         )
-
-
-def _version() -> str:
-    try:
-        return version("semreplay")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def _read_color(path: Path, k: Intrinsics) -> npt.NDArray[np.uint8]:

@@ -12,7 +12,7 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from capture.errors import ImportFormatError
-from capture.frames import Intrinsics
+from capture.recording.frames import Intrinsics
 
 FPS_WITHOUT_STAMPS: Final = 30.0
 _SEVEN_SCENES_COLOR: Final = re.compile(r"frame-(\d+)\.color\.(png|jpg)$")

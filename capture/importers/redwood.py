@@ -11,7 +11,6 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.errors import ImportFormatError
-from capture.frames import Intrinsics
 from capture.importers.common import (
     _Dataset,
     _format_error,
@@ -20,6 +19,7 @@ from capture.importers.common import (
     _numbers,
     _pose_matrix,
 )
+from capture.recording.frames import Intrinsics
 
 PRIMESENSE_K: Final = Intrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)  # Open3D PrimeSenseDefault
 SLAMBOOK_K: Final = Intrinsics(640, 480, 518.0, 519.0, 325.5, 253.5)

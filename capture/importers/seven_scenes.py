@@ -10,7 +10,6 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.errors import ImportFormatError
-from capture.frames import Intrinsics
 from capture.importers.common import (
     _SEVEN_SCENES_COLOR,
     _Dataset,
@@ -19,6 +18,7 @@ from capture.importers.common import (
     _index_stamp_ns,
     _numbers,
 )
+from capture.recording.frames import Intrinsics
 
 SEVEN_SCENES_K: Final = Intrinsics(640, 480, 585.0, 585.0, 320.0, 240.0)
 SEVEN_SCENES_INVALID_DEPTH: Final = 65535

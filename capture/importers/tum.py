@@ -14,8 +14,8 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
 
 from capture.errors import ImportFormatError
-from capture.frames import Intrinsics
 from capture.importers.common import _Dataset, _format_error, _Frame, _pose_matrix
+from capture.recording.frames import Intrinsics
 
 logger = logging.getLogger(__name__)
 

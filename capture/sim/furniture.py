@@ -10,11 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from capture.recording import Label
 from capture.sim import palette as pal
 from capture.sim.shapes import Mesh, box, cylinder, ellipsoid
 from capture.sim.textures import Material
-
-TABLE, CHAIR, PERSON, PLANT, SOFA, MONITOR, CLUTTER = 4, 5, 6, 7, 8, 9, 10
 
 
 @dataclass(slots=True)
@@ -45,7 +44,7 @@ def _legs(a: Assembly, w: float, d: float, h: float, t: float, mat: Material) ->
 
 def table(rng: np.random.Generator, *, width: float, depth: float, height: float) -> Assembly:
     """Return a four-legged table (or a round pedestal table when width == depth < 1 m)."""
-    a = Assembly(TABLE, "table")
+    a = Assembly(Label.TABLE, "table")
     top, legs = pal.wood(rng), (pal.wood(rng) if rng.random() < 0.5 else pal.metal(rng))
     t = float(rng.uniform(0.025, 0.045))
     if width == depth and width < 1.0:
@@ -69,7 +68,7 @@ def table(rng: np.random.Generator, *, width: float, depth: float, height: float
 
 def chair(rng: np.random.Generator) -> Assembly:
     """Return a chair: four legs, a seat and a back of slats or a panel (back at +y)."""
-    a = Assembly(CHAIR, "chair")
+    a = Assembly(Label.CHAIR, "chair")
     frame = pal.wood(rng) if rng.random() < 0.6 else pal.metal(rng)
     seat = pal.fabric(rng) if rng.random() < 0.5 else pal.plastic(rng)
     w, d = rng.uniform(0.40, 0.48, 2)
@@ -97,7 +96,7 @@ def chair(rng: np.random.Generator) -> Assembly:
 
 def monitor(rng: np.random.Generator) -> Assembly:
     """Return a desk monitor on a stand, screen facing -y."""
-    a = Assembly(MONITOR, "tv monitor")
+    a = Assembly(Label.TV_MONITOR, "tv monitor")
     body = pal.material(rng, "speckle", (*pal.METALS[:1], (0.22, 0.22, 0.24)), contrast=0.2)
     screen = pal.material(rng, "screen", ((0.15, 0.35, 0.6), (0.3, 0.5, 0.35), (0.5, 0.3, 0.5)))
     w = float(rng.uniform(0.45, 0.65))
@@ -112,7 +111,7 @@ def monitor(rng: np.random.Generator) -> Assembly:
 
 def wall_tv(rng: np.random.Generator) -> Assembly:
     """Return a flat television hung on a wall (origin at its bottom edge), screen to -y."""
-    a = Assembly(MONITOR, "tv monitor")
+    a = Assembly(Label.TV_MONITOR, "tv monitor")
     body = pal.material(rng, "speckle", ((0.08, 0.08, 0.09),), contrast=0.2)
     on = rng.random() < 0.6
     colors = ((0.2, 0.4, 0.7), (0.6, 0.4, 0.2)) if on else ((0.05, 0.05, 0.06),)
@@ -126,7 +125,7 @@ def wall_tv(rng: np.random.Generator) -> Assembly:
 
 def sofa(rng: np.random.Generator) -> Assembly:
     """Return a sofa: legs, base, seat cushions, back and two arms (back at +y)."""
-    a = Assembly(SOFA, "sofa")
+    a = Assembly(Label.SOFA, "sofa")
     cloth, legs = pal.fabric(rng), pal.wood(rng)
     w, d = float(rng.uniform(1.6, 2.3)), float(rng.uniform(0.80, 0.95))
     leg_h, seat_h, arm_w = 0.08, float(rng.uniform(0.40, 0.46)), float(rng.uniform(0.15, 0.24))
@@ -156,7 +155,7 @@ def sofa(rng: np.random.Generator) -> Assembly:
 
 def plant(rng: np.random.Generator, *, tall: bool) -> Assembly:
     """Return a potted plant: a pot, soil and a bush of leafy ellipsoids."""
-    a = Assembly(PLANT, "plant")
+    a = Assembly(Label.PLANT, "plant")
     r, pot_h = float(rng.uniform(0.12, 0.2)), float(rng.uniform(0.2, 0.35))
     a.add(
         cylinder(r, pot_h, center=(0, 0, pot_h / 2), top_scale=1.2, resolution=20),

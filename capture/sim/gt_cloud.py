@@ -13,6 +13,7 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import GT_CLOUD_ATTACHMENT, ply
 from capture.sim.render import Renderer
 from capture.sim.scene import Scene
 from capture.sim.shapes import triangle_areas
@@ -29,7 +30,6 @@ PLY_DTYPE: Final = np.dtype(
         ("instance", "<u2"),
     ]
 )
-_PLY_TYPES: Final = {"<f4": "float", "|u1": "uchar", "<u2": "ushort"}
 MIN_POINTS_PER_PART: Final = 20
 
 
@@ -97,20 +97,9 @@ def ply_bytes(cloud: LabelledPoints) -> bytes:
     data["x"], data["y"], data["z"] = cloud.points_m.T
     data["red"], data["green"], data["blue"] = cloud.colors.T
     data["label"], data["instance"] = cloud.labels, cloud.instances
-    header = [
-        "ply",
-        "format binary_little_endian 1.0",
-        "comment semreplay simulated ground truth",
-        f"element vertex {len(data)}",
-    ]
-    header += [f"property {_PLY_TYPES[PLY_DTYPE[n].str]} {n}" for n in PLY_DTYPE.names or ()]
-    header.append("end_header")
-    return ("\n".join(header) + "\n").encode("ascii") + data.tobytes()
+    return ply.encode(data, comment="semreplay simulated ground truth")
 
 
 def read_ply(data: bytes) -> npt.NDArray[np.void]:
     """Decode PLY bytes written by `ply_bytes` into a structured array of PLY_DTYPE."""
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    count = next(int(line.split()[2]) for line in header if line.startswith("element vertex"))
-    return np.frombuffer(data, PLY_DTYPE, count=count, offset=end)
+    return ply.decode(data, source=GT_CLOUD_ATTACHMENT).astype(PLY_DTYPE)

@@ -7,13 +7,14 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import Label
 from capture.sim import furniture as fu
 from capture.sim import props
 from capture.sim.placement import Placer, wall_pose
 
 Rng = np.random.Generator
 TRIES = 40
-OBJECT_CLASSES = frozenset(range(fu.TABLE, fu.CLUTTER + 1))
+OBJECT_CLASSES = frozenset(range(Label.TABLE, Label.CLUTTER + 1))
 
 
 def _try(

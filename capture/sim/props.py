@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from capture.recording import Label
 from capture.sim import palette as pal
-from capture.sim.furniture import CLUTTER, PERSON, Assembly
+from capture.sim.furniture import Assembly
 from capture.sim.shapes import box, cylinder, ellipsoid
 
 
 def bottle(rng: np.random.Generator) -> Assembly:
     """Return a bottle: body, shoulder, neck and cap."""
-    a = Assembly(CLUTTER, "bottle")
+    a = Assembly(Label.CLUTTER, "bottle")
     glass = pal.material(rng, "noise", pal.GLASS, glossy=True, contrast=0.2, texel_m=0.001)
     cap = pal.plastic(rng)
     r, h = float(rng.uniform(0.03, 0.045)), float(rng.uniform(0.14, 0.24))
@@ -24,7 +25,7 @@ def bottle(rng: np.random.Generator) -> Assembly:
 
 def cup(rng: np.random.Generator) -> Assembly:
     """Return a mug (a closed cylinder)."""
-    a = Assembly(CLUTTER, "cup")
+    a = Assembly(Label.CLUTTER, "cup")
     h = float(rng.uniform(0.08, 0.11))
     a.add(cylinder(float(rng.uniform(0.035, 0.045)), h, center=(0, 0, h / 2)), pal.plastic(rng))
     return a
@@ -32,7 +33,7 @@ def cup(rng: np.random.Generator) -> Assembly:
 
 def books(rng: np.random.Generator) -> Assembly:
     """Return a stack of two to five books."""
-    a = Assembly(CLUTTER, "books")
+    a = Assembly(Label.CLUTTER, "books")
     z = 0.0
     for _ in range(int(rng.integers(2, 6))):
         w, d, t = rng.uniform(0.15, 0.25), rng.uniform(0.2, 0.3), rng.uniform(0.02, 0.05)
@@ -44,7 +45,7 @@ def books(rng: np.random.Generator) -> Assembly:
 
 def carton(rng: np.random.Generator) -> Assembly:
     """Return a cardboard box standing on the floor."""
-    a = Assembly(CLUTTER, "box")
+    a = Assembly(Label.CLUTTER, "box")
     w, d, h = rng.uniform(0.25, 0.6, 3)
     cardboard = pal.material(rng, "speckle", ((0.65, 0.5, 0.32),), contrast=0.4, texel_m=0.002)
     a.add(box((w, d, h), center=(0, 0, h / 2)), cardboard)
@@ -53,7 +54,7 @@ def carton(rng: np.random.Generator) -> Assembly:
 
 def waste_bin(rng: np.random.Generator) -> Assembly:
     """Return a waste bin (a frustum)."""
-    a = Assembly(CLUTTER, "bin")
+    a = Assembly(Label.CLUTTER, "bin")
     h = float(rng.uniform(0.3, 0.42))
     a.add(cylinder(0.12, h, center=(0, 0, h / 2), top_scale=1.25, resolution=20), pal.plastic(rng))
     return a
@@ -61,7 +62,7 @@ def waste_bin(rng: np.random.Generator) -> Assembly:
 
 def keyboard(rng: np.random.Generator) -> Assembly:
     """Return a keyboard whose tile pattern draws the keys."""
-    a = Assembly(CLUTTER, "keyboard")
+    a = Assembly(Label.CLUTTER, "keyboard")
     keys = pal.material(rng, "tiles", pal.METALS, texel_m=0.00025, contrast=0.5)
     a.add(box((0.44, 0.14, 0.02), center=(0, 0, 0.01)), keys)
     return a
@@ -69,7 +70,7 @@ def keyboard(rng: np.random.Generator) -> Assembly:
 
 def person(rng: np.random.Generator) -> Assembly:
     """Return a standing person facing -y: shoes, legs, torso, arms, neck and head."""
-    a = Assembly(PERSON, "person")
+    a = Assembly(Label.PERSON, "person")
     s = float(rng.uniform(1.55, 1.9)) / 1.75  # scale of a 1.75 m body
     skin = pal.material(rng, "noise", pal.SKINS, contrast=0.1)
     shirt = pal.material(rng, "weave", pal.FABRICS + pal.PLASTICS, texel_m=0.002)

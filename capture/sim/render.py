@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
-from capture.frames import Extrinsics, Intrinsics
+from capture.recording.frames import Extrinsics, Intrinsics
 from capture.sim.scene import Scene
 from capture.sim.textures import TEXTURE_SIZE, make_texture
 

@@ -8,12 +8,12 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import Label
 from capture.sim import palette as pal
 from capture.sim.layout import furnish
 from capture.sim.placement import LoopPath, PlacedPart, Placer
 from capture.sim.shapes import plane_grid
 
-CEILING, FLOOR, WALL = 1, 2, 3
 STRUCTURE_NAMES: Final = {1: "floor", 2: "ceiling", 3: "wall", 4: "wall", 5: "wall", 6: "wall"}
 PATH_CLEARANCE_M: Final = 0.5  # free space each side of the walking loop
 ATTEMPTS: Final = 20
@@ -67,7 +67,7 @@ def _structure(room: tuple[float, float, float], rng: np.random.Generator) -> li
         ((-x - e, y, -e), (xe, 0, 0), (0, 0, ze)),  # wall y = +Y/2, -y
         ((-x, -y - e, -e), (0, ye, 0), (0, 0, ze)),  # wall x = -X/2, +x
     ]
-    kinds = [(floor, FLOOR), (ceiling, CEILING)] + [(wall, WALL)] * 4
+    kinds = [(floor, Label.FLOOR), (ceiling, Label.CEILING)] + [(wall, Label.WALL)] * 4
     return [
         PlacedPart(plane_grid(*g, cell_m=GRID_CELL_M), mat, label, instance)
         for instance, (g, (mat, label)) in enumerate(zip(grid, kinds, strict=True), start=1)

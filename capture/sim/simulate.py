@@ -8,7 +8,6 @@ from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Final
 
@@ -17,6 +16,7 @@ import numpy.typing as npt
 
 from capture.errors import CaptureError
 from capture.recording import GT_CLOUD_ATTACHMENT, RecordingWriter
+from capture.recording.writer import capture_record
 from capture.sim.gt_cloud import ply_bytes, sample_scene
 from capture.sim.noise import ColorSensorNoise, D435DepthModel
 from capture.sim.render import CameraRig, ColorView, DepthView, Renderer, d435_rig
@@ -209,17 +209,12 @@ def _device(seed: int) -> dict[str, str]:
 
 
 def _capture_summary(config: dict[str, object], frames: int, start_ns: int) -> dict[str, object]:
-    try:
-        tool_version = version("semreplay")
-    except PackageNotFoundError:
-        tool_version = "unknown"
-    start = datetime.fromtimestamp(start_ns / 1e9, tz=UTC).isoformat()
-    return {
-        "tool": "semreplay-capture simulate",
-        "version": tool_version,
-        "config": config,
-        "host": "simulator",
-        "start_time": start,
-        "frames_written": {"color": frames, "depth": frames, "ground_truth": frames},
-        "frames_dropped": {"color": 0, "depth": 0},
-    }
+    return capture_record(
+        "semreplay-capture simulate",
+        source="simulator",
+        config=config,
+        host="simulator",
+        start_time=datetime.fromtimestamp(start_ns / 1e9, tz=UTC).isoformat(),
+        frames_written={"color": frames, "depth": frames, "ground_truth": frames},
+        frames_dropped={"color": 0, "depth": 0},
+    )

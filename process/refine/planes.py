@@ -9,11 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import Label
 from process.refine.config import RefineConfig
 
 logger = logging.getLogger(__name__)
 
-CEILING, FLOOR, WALL = 1, 2, 3  # RECORDING.md label ids
 _PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
 _SNAP_UP_DEG = 30.0  # a given `up` is replaced by the normal of the largest plane this close to it
 
@@ -165,11 +165,13 @@ def _classify(
     low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
     label = 0
     if level and height - low <= cfg.structure_height_tol_m:
-        label = FLOOR
+        label = Label.FLOOR
     elif level and high - height <= cfg.structure_height_tol_m:
-        label = CEILING
+        label = Label.CEILING
     elif upright and float(np.percentile(heights[kept], 99.0)) - low >= cfg.wall_min_height_m:
-        label = WALL  # upright and rising well above the floor: chair backs and desk sides do not
+        label = (
+            Label.WALL
+        )  # upright and rising well above the floor: chair backs and desk sides do not
     return Plane(model, indices, label, kept if label else none, height)
 
 

@@ -1,73 +1,20 @@
 """What the refinement shows of each step: one call per step to a logger the pipeline passes in.
 
-The logger is `viz.rerun_log.RerunLogger` (or its do-nothing twin); it is described here as a
-protocol so that the refinement does not import `viz`. Stage numbers are ARCHITECTURE.md's
-`stage` timeline.
+The logger is the pipeline's `viz.logger.Logger`. Stage numbers are ARCHITECTURE.md's `stage`
+timeline (viz.layout).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Literal, Protocol
-
 import numpy as np
-import numpy.typing as npt
 
 from capture.recording import LABEL_NAMES
 from process.refine.steps import ClassClustering, RefineResult
-
-STAGE_PLANES, STAGE_SOR, STAGE_DBSCAN, STAGE_REGROWTH, STAGE_FINAL = 1, 2, 3, 4, 5
-
-
-class StepLogger(Protocol):
-    """The part of the pipeline's logger that the refinement uses."""
-
-    def set_stage(self, step: int) -> None:
-        """Set the `stage` timeline for what follows."""
-
-    def log_refine(
-        self,
-        kind: Literal["planes", "outliers", "clusters", "regrown"],
-        points: npt.NDArray[np.floating],
-        *,
-        labels: npt.NDArray[np.integer] | None = None,
-        clusters: npt.NDArray[np.integer] | None = None,
-    ) -> None:
-        """Log the points of one refinement step."""
-
-    def log_map(
-        self,
-        kind: Literal["fused", "refined"],
-        points: npt.NDArray[np.floating],
-        *,
-        colors: npt.NDArray[np.uint8] | None = None,
-        labels: npt.NDArray[np.integer] | None = None,
-    ) -> None:
-        """Log a labelled point map."""
-
-    def log_dbscan_curves(
-        self,
-        label_name: str,
-        *,
-        ks: npt.NDArray[np.integer],
-        eps_m: npt.NDArray[np.floating],
-        min_pts: npt.NDArray[np.floating],
-        n_clusters: npt.NDArray[np.integer],
-        chosen_k: int,
-    ) -> None:
-        """Log the adaptive-DBSCAN curves of one class and its chosen K."""
-
-    def log_text(self, message: str, *, level: str = "INFO") -> None:
-        """Log a line of text."""
-
-    def log_timing(self, stage: str, seconds: float) -> None:
-        """Log the time a stage took."""
-
-    def log_metrics(self, section: str, values: Mapping[str, float]) -> None:
-        """Log named scalar metrics."""
+from viz.layout import STAGE_DBSCAN, STAGE_FINAL, STAGE_PLANES, STAGE_REGROWTH, STAGE_SOR
+from viz.logger import Logger
 
 
-def log_steps(result: RefineResult, viz: StepLogger) -> None:
+def log_steps(result: RefineResult, viz: Logger) -> None:
     """Log planes, SOR outliers, DBSCAN clusters and curves, regrown points and the final map."""
     viz.set_stage(STAGE_PLANES)
     planes = result.plane_cloud()
@@ -96,7 +43,7 @@ def log_steps(result: RefineResult, viz: StepLogger) -> None:
         viz.log_timing(f"refine_{step}", seconds)
 
 
-def _log_curves(entry: ClassClustering, viz: StepLogger) -> None:
+def _log_curves(entry: ClassClustering, viz: Logger) -> None:
     """Log one class's eps / MinPts / cluster-count curves over the K that DBSCAN ran for."""
     name = LABEL_NAMES[entry.label] if entry.label else "all classes"
     if entry.curves is None or entry.choice is None:

@@ -18,6 +18,7 @@ from torch import nn
 
 from capture.recording import NUM_LABELS, VOC_TO_LABEL
 from process.errors import ModelError
+from process.outputs import atomic_path
 from process.segmentation.deeplab import PRESETS, ArchConfig, DeepLab
 from process.segmentation.torchvision_map import (
     TORCHVISION_FILES,
@@ -67,14 +68,13 @@ def save_checkpoint(ckpt: Checkpoint, path: Path, *, half: bool = False) -> Path
     }
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    if path.suffix == ".safetensors":
-        from safetensors.torch import save_file
+    with atomic_path(path) as tmp:
+        if path.suffix == ".safetensors":
+            from safetensors.torch import save_file
 
-        save_file(tensors, str(tmp), metadata=meta)
-    else:
-        torch.save({**meta, "state_dict": tensors}, tmp)
-    tmp.replace(path)
+            save_file(tensors, str(tmp), metadata=meta)
+        else:
+            torch.save({**meta, "state_dict": tensors}, tmp)
     return path
 
 

@@ -15,10 +15,10 @@ from helpers_capture import (
     expected_intrinsics,
 )
 
-from capture import ros_msgs as m
 from capture.errors import CameraError
-from capture.realsense import convert
+from capture.realsense.record import convert
 from capture.recording import RecordingReader
+from capture.recording import messages as m
 
 FRAMES = 8
 

@@ -28,8 +28,9 @@ from helpers_capture import (
 )
 
 from capture.errors import CameraError, CaptureError
-from capture.mcap_threaded import StreamFrame, ThreadedWriter
-from capture.realsense import RecordConfig, RecordResult, RecordStatus, record
+from capture.realsense.record import record
+from capture.realsense.session import RecordConfig, RecordResult, RecordStatus
+from capture.realsense.sink import StreamFrame, ThreadedWriter
 from capture.recording import RecordingReader, RecordingWriter
 
 CONFIG = RecordConfig(

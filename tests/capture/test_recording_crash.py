@@ -23,7 +23,7 @@ from helpers_capture import (
 )
 
 from capture.errors import RecordingError
-from capture.mcap_threaded import StreamFrame, ThreadedWriter, finish_recording
+from capture.realsense.sink import StreamFrame, ThreadedWriter, finish_recording
 from capture.recording import RecordingReader, RecordingWriter
 
 HELPER = ROOT / "tests" / "helpers_capture.py"
@@ -32,7 +32,7 @@ HELPER = ROOT / "tests" / "helpers_capture.py"
 def _recover(path: Path, caplog: pytest.LogCaptureFixture) -> tuple[bool, list[int]]:
     """Return (finished, frame numbers) read back, and check the single recovery warning."""
     with (
-        caplog.at_level(logging.WARNING, logger="capture.mcap_reader"),
+        caplog.at_level(logging.WARNING, logger="capture.recording.reader"),
         RecordingReader(path) as rec,
     ):
         finished = rec.finished

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
 from capture.recording import Intrinsics, RecordingReader, RecordingWriter
+from capture.recording import messages as m
 
 K = Intrinsics(32, 24, 30.0, 30.0, 16.0, 12.0)
 NS = m.DEFAULT_NAMESPACE

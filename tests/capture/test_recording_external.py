@@ -83,7 +83,7 @@ def test_rerun_checks_our_recordings(recording: Path, tmp_path: Path) -> None:
 
 
 def test_rerun_checks_a_converted_realsense_file(tmp_path: Path) -> None:
-    from capture.realsense import convert
+    from capture.realsense.record import convert
 
     rerun = _rerun()
     SoftCamera().record_file(tmp_path / "cam.db3", 3)

@@ -12,7 +12,6 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
 
-from capture import ros_msgs as m
 from capture.recording import (
     Extrinsics,
     GroundTruth,
@@ -21,6 +20,7 @@ from capture.recording import (
     RecordingWriter,
     RgbdFrame,
 )
+from capture.recording import messages as m
 
 COLOR_K = Intrinsics(64, 48, 60.5, 61.0, 31.5, 23.25, "plumb_bob", (0.1, -0.2, 0.001, 0.002, 0.03))
 DEPTH_K = Intrinsics(40, 30, 38.0, 38.5, 19.5, 14.5)

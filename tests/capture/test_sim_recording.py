@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture.frames import RgbdFrame
 from capture.recording import GT_CLOUD_ATTACHMENT, RecordingReader
+from capture.recording.frames import RgbdFrame
 from capture.sim import FrameSimulator, handheld_loop, read_ply, simulate_recording
 from capture.sim.trajectory import SIM_EPOCH_NS
 

@@ -14,7 +14,7 @@ from helpers_sim import (
     wall_at,
 )
 
-from capture.frames import Intrinsics
+from capture.recording.frames import Intrinsics
 from capture.sim import FrameSimulator, Renderer, Scene, build_scene, d435_rig
 from capture.sim.placement import PlacedPart
 from capture.sim.shapes import plane_grid

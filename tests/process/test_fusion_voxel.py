@@ -7,7 +7,7 @@ import pytest
 
 from capture.recording import Intrinsics
 from process.errors import ConfigError, StageError
-from process.fusion import Fusion, FusionConfig
+from process.fusion.votes import Fusion, FusionConfig
 
 K = Intrinsics(64, 48, 500.0, 500.0, 31.5, 23.5)  # 4 mm pixels at 2 m: ~25 per 2 cm voxel
 PLANE_Z_M = 2.01  # the world plane, mid-voxel (a voxel boundary would split it in two layers)

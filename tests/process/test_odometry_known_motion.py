@@ -13,7 +13,7 @@ import pytest
 from helpers_odometry import K_VGA, pose, render, rotation_deg, to_frame
 
 from capture.recording import Intrinsics, RgbdFrame
-from process.odometry import Odometry, OdometryConfig
+from process.odometry.odometry import Odometry, OdometryConfig
 from process.trajectory import ate_rmse
 
 START = pose((0.3, 0.1, -0.2), yaw_deg=20.0, pitch_deg=-5.0)

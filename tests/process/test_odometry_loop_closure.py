@@ -7,8 +7,8 @@ import numpy.typing as npt
 from helpers_odometry import K_QVGA, loop_poses, render, to_frame, track_all
 from scipy.spatial.transform import Rotation
 
-from process.loop_closure import Edge, PoseGraph
-from process.odometry import Odometry, OdometryConfig
+from process.odometry.odometry import Odometry, OdometryConfig
+from process.odometry.pose_graph import Edge, PoseGraph
 from process.trajectory import ate_rmse
 
 

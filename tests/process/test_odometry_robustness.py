@@ -11,7 +11,7 @@ from helpers_odometry import K_QVGA, RenderedFrame, pose, render, to_frame, trac
 
 from capture.recording import RgbdFrame
 from process.errors import ConfigError
-from process.odometry import Odometry, OdometryConfig, TrackResult
+from process.odometry.odometry import Odometry, OdometryConfig, TrackResult
 
 
 @cache

@@ -10,7 +10,7 @@ import pytest
 
 from capture.recording import RecordingReader
 from process.depth import DepthConfig, DepthProcessor
-from process.odometry import Odometry, OdometryConfig
+from process.odometry.odometry import Odometry, OdometryConfig
 from process.trajectory import ate_rmse, path_length, read_tum, write_tum
 
 

@@ -1,6 +1,5 @@
 from __future__ import annotations
 
-import dataclasses
 import tomllib
 from pathlib import Path
 
@@ -71,10 +70,13 @@ def test_the_effective_config_reads_back_equal(tmp_path: Path) -> None:
     assert load_config(write(tmp_path, text)) == cfg
 
 
-def test_the_sample_config_loads_and_differs_from_nothing_unknown() -> None:
+def test_the_sample_config_shows_the_defaults_it_sets() -> None:
+    # samples/sample.toml documents knobs at their current defaults: a default changed in the
+    # code without the sample (or the reverse) fails here.
     sample = Path(__file__).resolve().parents[2] / "samples" / "sample.toml"
-    cfg = load_config(sample)
-    assert dataclasses.asdict(cfg).keys() == dataclasses.asdict(ReplayConfig()).keys()
+    text = sample.read_text(encoding="utf-8")
+    assert sum(1 for line in text.splitlines() if "=" in line and not line.startswith("#")) >= 10
+    assert load_config(sample) == ReplayConfig()
 
 
 @pytest.mark.parametrize(

@@ -17,7 +17,7 @@ from process import outputs
 from process.cli import app
 from process.cloud import read_cloud
 from process.errors import StageError
-from process.odometry import Odometry
+from process.odometry.odometry import Odometry
 from process.pipeline import ReplayPipeline
 from process.trajectory import read_tum
 

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from helpers_refine import RecordingLogger, grid_patch, labelled
 
+from benchmarks.synthetic_office import SyntheticScene, indoor_scene
 from process.cloud import ply_bytes, read_cloud, write_ply
 from process.errors import CloudError, ConfigError, StageError
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
-from process.refine.synthetic import SyntheticScene, indoor_scene
-from process.refine_job import refine_and_log, refine_file
+from process.refine.job import refine_and_log, refine_file
 
 UP = np.array([0.0, 0.0, 1.0])
 

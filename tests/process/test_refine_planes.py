@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from helpers_refine import grid_patch
 
+from capture.recording import Label
 from process.refine import RefineConfig
 from process.refine.outliers import sor_inliers
-from process.refine.planes import CEILING, FLOOR, WALL, segment_planes
+from process.refine.planes import segment_planes
 
 UP = np.array([0.0, 0.0, 1.0])
 CFG = RefineConfig(plane_min_points=2000, plane_max_remaining=100)
@@ -32,8 +33,8 @@ def _room() -> tuple[np.ndarray, dict[str, slice]]:
 def test_a_plane_at_a_known_height_is_the_floor() -> None:
     points, parts = _room()
     seg = segment_planes(points, CFG, up=UP)
-    assert (seg.labels[parts["floor"]] == FLOOR).all()
-    floor = next(p for p in seg.planes if p.label == FLOOR)
+    assert (seg.labels[parts["floor"]] == Label.FLOOR).all()
+    floor = next(p for p in seg.planes if p.label == Label.FLOOR)
     assert floor.height_m == pytest.approx(0.5, abs=1e-3)
     assert abs(floor.model[2]) == pytest.approx(1.0, abs=1e-6)
 
@@ -41,8 +42,8 @@ def test_a_plane_at_a_known_height_is_the_floor() -> None:
 def test_ceiling_and_wall_are_classified_and_a_table_top_stays_an_object() -> None:
     points, parts = _room()
     seg = segment_planes(points, CFG, up=UP)
-    assert (seg.labels[parts["ceiling"]] == CEILING).all()
-    assert (seg.labels[parts["wall"]] == WALL).all()
+    assert (seg.labels[parts["ceiling"]] == Label.CEILING).all()
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()
     assert (seg.labels[parts["table"]] == 0).all()
     assert not seg.structural[parts["table"]].any()
 
@@ -52,7 +53,7 @@ def test_without_gravity_the_largest_plane_is_the_floor() -> None:
     seg = segment_planes(points, CFG, up=None)
     assert seg.up_source == "largest plane"
     assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-6)
-    assert (seg.labels[parts["floor"]] == FLOOR).all()
+    assert (seg.labels[parts["floor"]] == Label.FLOOR).all()
 
 
 def test_a_tilted_gravity_is_snapped_to_the_floor() -> None:
@@ -69,7 +70,7 @@ def test_furniture_coplanar_with_a_wall_but_far_from_it_stays_an_object() -> Non
     shelf[:, 1] = 2.1
     shelf[:, 0] += 3.0  # 1 m beyond the wall's end
     seg = segment_planes(np.concatenate([points, shelf]), CFG, up=UP)
-    assert (seg.labels[parts["wall"]] == WALL).all()
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()
     assert (seg.labels[len(points) :] == 0).all()
 
 

@@ -1,7 +1,7 @@
 """A live D435, or a RealSense recording (.bag, .db3), into an MCAP recording via pyrealsense2.
 
-The only module that imports pyrealsense2 (lazily); capture.realsense_device and
-capture.realsense_camera are handed it. Both paths run the sensors with frame callbacks that copy
+The only module that imports pyrealsense2 (lazily); capture.realsense.device and
+capture.realsense.camera are handed it. Both paths run the sensors with frame callbacks that copy
 each frame into a `ThreadedWriter`; the device is injectable, so the tests drive the same code with
 an `rs.software_device`. Sensors are used directly rather than through `rs.pipeline`: a pipeline
 over a played-back file cannot pace non-real-time playback by its consumer, and dedupes nothing; a
@@ -19,31 +19,17 @@ from pathlib import Path
 from typing import Any
 
 from capture.errors import CameraError
-from capture.mcap_session import (
+from capture.realsense.camera import Camera
+from capture.realsense.device import configure, find_device, select_streams
+from capture.realsense.session import (
     RecordConfig,
     RecordResult,
     RecordStatus,
-    capture_record,
     finish_session,
     start_sink,
     watch,
 )
-from capture.realsense_camera import Camera
-from capture.realsense_device import configure, find_device, intrinsics_of, select_streams
-
-__all__ = [
-    "Camera",
-    "RecordConfig",
-    "RecordResult",
-    "RecordStatus",
-    "configure",
-    "convert",
-    "find_device",
-    "intrinsics_of",
-    "record",
-    "rs_module",
-    "select_streams",
-]
+from capture.recording.writer import capture_record
 
 
 def rs_module() -> Any:
@@ -84,7 +70,9 @@ def record(
         streams = select_streams(rs, dev, config)
         configure(rs, streams, config)
     sink = start_sink(Path(path), streams, config=config, blocking=False)
-    sink.writer.write_metadata("capture", capture_record("live", asdict(config)))
+    sink.writer.write_metadata(
+        "capture", capture_record("semreplay-capture record", source="live", config=asdict(config))
+    )
     camera = Camera(rs, streams, sink, align=config.align)
     t0 = time.monotonic()
     reason, lost = "stopped", False
@@ -114,7 +102,12 @@ def convert(
         raise CameraError(f"{err}: {src}") from err
     config = RecordConfig(compression=compression, queue_size=16)
     sink = start_sink(Path(out), streams, config=config, blocking=True)
-    sink.writer.write_metadata("capture", capture_record(str(src), {"compression": compression}))
+    sink.writer.write_metadata(
+        "capture",
+        capture_record(
+            "semreplay-capture convert", source=str(src), config={"compression": compression}
+        ),
+    )
     camera = Camera(rs, streams, sink, align=False)
     t0 = time.monotonic()
     try:

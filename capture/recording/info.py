@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from capture.errors import RecordingError
-from capture.mcap_index import TopicInfo, read_index
-from capture.mcap_reader import RecordingReader
+from capture.recording.index import TopicInfo, read_index
+from capture.recording.reader import RecordingReader
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,6 +8,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from process.geometry import rigid_inverse
+
 _PRIOR_GATE = 4.0  # matches within this many RANSAC thresholds of the prior seed its hypothesis
 _PRIOR_SHARE = 0.8  # the prior's hypothesis wins with at least this share of RANSAC's inliers
 
@@ -126,15 +128,6 @@ def _reprojection_errors(
     behind = (obj @ rot.T + tvec.reshape(1, 3))[:, 2] <= 0
     err[behind] = np.inf
     return err
-
-
-def rigid_inverse(transform: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Return the inverse of a 4x4 rigid transform."""
-    out = np.eye(4)
-    rot = transform[:3, :3]
-    out[:3, :3] = rot.T
-    out[:3, 3] = -rot.T @ transform[:3, 3]
-    return out
 
 
 def to_matrix(

@@ -8,13 +8,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from process.odometry_features import FeatureExtractor, Keyframe
-from process.odometry_matching import guided_match, match
-from process.odometry_pnp import PnpResult, PnpSolver
-from process.odometry_refine import refine_with_depth
+from process.odometry.features import FeatureExtractor, Keyframe
+from process.odometry.matching import guided_match, match
+from process.odometry.pnp import PnpResult, PnpSolver
+from process.odometry.pose_refine import refine_with_depth
 
 if TYPE_CHECKING:
-    from process.odometry_config import OdometryConfig
+    from process.odometry.config import OdometryConfig
 
 
 @dataclass(frozen=True, slots=True)

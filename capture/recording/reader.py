@@ -9,21 +9,17 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
-import numpy as np
-import numpy.typing as npt
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
-from capture.frames import RgbdFrame
-from capture.mcap_index import McapIndex, TopicInfo, read_index, stream_records
-from capture.mcap_sync import (
+from capture.recording import messages as m
+from capture.recording.frames import RgbdFrame
+from capture.recording.index import McapIndex, TopicInfo, read_index, stream_records
+from capture.recording.sync import (
     FrameSync,
     Topics,
-    decode_color,
-    decode_depth,
     intrinsics_from_msg,
     pose_from_msg,
 )
@@ -270,12 +266,3 @@ class RecordingReader:
         for topic, msg, log_ns in self._messages(topics):
             yield from sync.push(topic, msg, log_ns)
         yield from sync.drain()
-
-    # -- decoding --------------------------------------------------------------------------
-    def decode_color(self, topic: str, msg: Any) -> npt.NDArray[np.uint8]:
-        """Return an (H, W, 3) RGB image from a decoded Image or CompressedImage."""
-        return decode_color(topic, msg, self.path)
-
-    def decode_depth(self, topic: str, msg: Any) -> npt.NDArray[np.float32]:
-        """Return depth in metres (0 = none) from a decoded 16UC1/mono16/32FC1 Image."""
-        return decode_depth(topic, msg, self.path, scale_m=self.depth_scale_m)

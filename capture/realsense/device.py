@@ -1,6 +1,6 @@
 """Find a RealSense device, choose its depth and colour streams, and set its depth options.
 
-Every function takes the pyrealsense2 module as `rs` (see capture.realsense.rs_module).
+Every function takes the pyrealsense2 module as `rs` (see capture.realsense.record.rs_module).
 """
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ from __future__ import annotations
 from typing import Any
 
 from capture.errors import CameraError
-from capture.frames import Extrinsics, Intrinsics
-from capture.mcap_session import RecordConfig, Streams
-from capture.realsense_camera import TO_RGB
+from capture.realsense.camera import TO_RGB
+from capture.realsense.session import RecordConfig, Streams
+from capture.recording.frames import Extrinsics, Intrinsics
 
 _DEVICE_INFO = {"name": "name", "serial_number": "serial_number",
                 "firmware_version": "firmware_version", "usb_type": "usb_type_descriptor",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
@@ -13,15 +12,14 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import GT_CLOUD_ATTACHMENT, LABEL_NAMES
-from process.cloud import LabelledCloud, parse_ply, read_cloud, write_atomic, write_ply
+from process import outputs
+from process.cloud import LabelledCloud, parse_ply, read_cloud, write_ply
 from process.evaluate import cloud_phase_metrics
 from process.refine import ClassClustering, RefineConfig, RefineResult, refine
-from process.refine.steplog import StepLogger, log_steps
+from process.refine.steplog import log_steps
+from viz.logger import Logger
 
 logger = logging.getLogger(__name__)
-
-REFINED_PLY = "map_refined.ply"
-METRICS_JSON = "metrics.json"
 
 
 def refine_file(
@@ -44,11 +42,11 @@ def refine_file(
     truth = read_cloud(gt_cloud) if gt_cloud is not None else None
     result = refine(cloud, cfg)
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_ply(out_dir / REFINED_PLY, result.final())
+    write_ply(out_dir / outputs.MAP_REFINED, result.final())
     section = refinement_metrics(result, gt_cloud=truth)
     metrics = {"refinement": section, "seconds": {"refinement": time.perf_counter() - start}}
-    write_atomic(out_dir / METRICS_JSON, json.dumps(metrics, indent=2).encode("utf-8"))
-    logger.info("refined %s -> %s", cloud_path, out_dir / REFINED_PLY)
+    outputs.write_metrics(out_dir / outputs.METRICS, metrics)
+    logger.info("refined %s -> %s", cloud_path, out_dir / outputs.MAP_REFINED)
     return section
 
 
@@ -56,7 +54,7 @@ def refine_and_log(
     cloud: LabelledCloud,
     cfg: RefineConfig,
     *,
-    viz: StepLogger,
+    viz: Logger,
     up: npt.NDArray[np.float64] | None = None,
     gt_cloud_ply: bytes | None = None,
 ) -> tuple[LabelledCloud, dict[str, Any]]:

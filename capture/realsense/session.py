@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, Protocol
 
 from capture.errors import CaptureError
-from capture.frames import Extrinsics, Intrinsics
-from capture.mcap_threaded import ThreadedWriter, finish_recording
-from capture.mcap_writer import RecordingWriter
+from capture.realsense.sink import ThreadedWriter, finish_recording
+from capture.recording.frames import Extrinsics, Intrinsics
+from capture.recording.writer import RecordingWriter
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,26 +110,6 @@ class Restartable(Protocol):
 
     def stop(self) -> None:
         """Stop the camera's sensors."""
-
-
-def tool_version() -> str:
-    """Return the installed version of semreplay."""
-    try:
-        return version("semreplay")
-    except PackageNotFoundError:
-        return "0+unknown"
-
-
-def capture_record(source: str, settings: dict[str, object]) -> dict[str, object]:
-    """Return the start of the `capture` metadata record of RECORDING.md."""
-    return {
-        "tool": "semreplay-capture",
-        "version": tool_version(),
-        "source": source,
-        "config": settings,
-        "host": socket.gethostname(),
-        "start_time": datetime.now().astimezone().isoformat(timespec="seconds"),
-    }
 
 
 def watch(

@@ -12,8 +12,8 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.errors import CameraError, CaptureError
-from capture.mcap_session import Streams
-from capture.mcap_threaded import StreamFrame, ThreadedWriter
+from capture.realsense.session import Streams
+from capture.realsense.sink import StreamFrame, ThreadedWriter
 
 # Colour formats a recording may hold, and how to turn them into RGB.
 TO_RGB = {"rgb8": None, "bgr8": cv2.COLOR_BGR2RGB, "rgba8": cv2.COLOR_RGBA2RGB,

@@ -14,15 +14,15 @@ from typing import IO, Any, Self
 from mcap.well_known import SchemaEncoding
 from mcap_ros2._dynamic import serialize_dynamic
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
-from capture.mcap_chunked import COMPRESSIONS, McapChunkWriter
+from capture.recording import messages as m
+from capture.recording.chunks import COMPRESSIONS, McapChunkWriter
 
 logger = logging.getLogger(__name__)
 
 
 class McapMessageWriter:
-    """Write CDR messages of the ROS 2 types of capture.ros_msgs to an MCAP file.
+    """Write CDR messages of the ROS 2 types of capture.recording.messages to an MCAP file.
 
     A chunk is closed and flushed to the operating system at least every `chunk_interval_s`
     of recording (and of wall time), so a killed process loses at most that much.

@@ -21,7 +21,7 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from capture.recording import Intrinsics
-from process.odometry_pnp import rigid_inverse
+from process.geometry import rigid_inverse
 
 _METHODS = {
     "point_to_plane": o3d.t.pipelines.odometry.Method.PointToPlane,

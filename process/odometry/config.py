@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from process.errors import ConfigError
-from process.odometry_dense import DENSE_METHODS
+from process.odometry.dense import DENSE_METHODS
 
 # Inclusive ranges of the numeric settings.
 _RANGES: Final[dict[str, tuple[float, float]]] = {

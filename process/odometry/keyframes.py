@@ -8,12 +8,12 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Intrinsics
-from process.odometry_dense import DenseAligner, pose_difference
-from process.odometry_features import Keyframe, visible_share
-from process.odometry_pnp import rigid_inverse
+from process.geometry import rigid_inverse
+from process.odometry.dense import DenseAligner, pose_difference
+from process.odometry.features import Keyframe, visible_share
 
 if TYPE_CHECKING:
-    from process.odometry_config import OdometryConfig
+    from process.odometry.config import OdometryConfig
 
 
 def needs_keyframe(

@@ -6,7 +6,7 @@ Everything another package needs of the recording format is importable from here
 from __future__ import annotations
 
 from capture.errors import RecordingError
-from capture.frames import (
+from capture.recording.frames import (
     LABEL_COLORS,
     LABEL_NAMES,
     NUM_LABELS,
@@ -16,11 +16,12 @@ from capture.frames import (
     Extrinsics,
     GroundTruth,
     Intrinsics,
+    Label,
     RgbdFrame,
 )
-from capture.mcap_reader import RecordingReader, TopicInfo
-from capture.mcap_writer import RecordingWriter
-from capture.ros_msgs import DEFAULT_NAMESPACE, GT_CLOUD_ATTACHMENT
+from capture.recording.messages import DEFAULT_NAMESPACE, GT_CLOUD_ATTACHMENT
+from capture.recording.reader import RecordingReader, TopicInfo
+from capture.recording.writer import RecordingWriter
 
 __all__ = [
     "DEFAULT_NAMESPACE",
@@ -34,6 +35,7 @@ __all__ = [
     "Extrinsics",
     "GroundTruth",
     "Intrinsics",
+    "Label",
     "RecordingError",
     "RecordingReader",
     "RecordingWriter",

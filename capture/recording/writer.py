@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import json
 import logging
+import socket
 from collections.abc import Mapping
+from datetime import datetime
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO
 
@@ -12,12 +15,51 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
-from capture.frames import Extrinsics, Intrinsics, RgbdFrame
-from capture.mcap_messages import McapMessageWriter
+from capture.recording import messages as m
+from capture.recording.frames import Extrinsics, Intrinsics, RgbdFrame
+from capture.recording.ros_writer import McapMessageWriter
 
 logger = logging.getLogger(__name__)
+
+
+def tool_version() -> str:
+    """Return the installed version of semreplay."""
+    try:
+        return version("semreplay")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def capture_record(
+    tool: str,
+    *,
+    source: str,
+    config: Mapping[str, object],
+    start_time: str | None = None,
+    host: str | None = None,
+    **extra: object,
+) -> dict[str, object]:
+    """Return the `capture` metadata record of RECORDING.md (the one builder of it).
+
+    Args:
+        tool: the command that wrote the recording, e.g. "semreplay-capture record".
+        source: what was recorded: "live", a file, a dataset folder, "simulator".
+        config: the effective capture settings.
+        start_time: ISO 8601 start of the capture (default: now, local time).
+        host: the machine (default: this host's name).
+        **extra: more fields, e.g. frames_written and frames_dropped at the end of a capture.
+    """
+    now = datetime.now().astimezone().isoformat(timespec="seconds")
+    return {
+        "tool": tool,
+        "version": tool_version(),
+        "source": source,
+        "config": dict(config),
+        "host": socket.gethostname() if host is None else host,
+        "start_time": now if start_time is None else start_time,
+        **extra,
+    }
 
 
 def camera_info(stamp_ns: int, frame_id: str, k: Intrinsics) -> dict[str, object]:

@@ -23,8 +23,8 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.errors import CaptureError, RecordingError
-from capture.frames import Extrinsics, Intrinsics
-from capture.mcap_writer import RecordingWriter
+from capture.recording.frames import Extrinsics, Intrinsics
+from capture.recording.writer import RecordingWriter
 
 logger = logging.getLogger(__name__)
 

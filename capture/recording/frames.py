@@ -3,12 +3,30 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
-# Labels of RECORDING.md (the paper's Table 6, plus 0).
+
+class Label(IntEnum):
+    """The label ids of RECORDING.md (the paper's Table 6, plus 0)."""
+
+    UNLABELLED = 0
+    CEILING = 1
+    FLOOR = 2
+    WALL = 3
+    TABLE = 4
+    CHAIR = 5
+    PERSON = 6
+    PLANT = 7
+    SOFA = 8
+    TV_MONITOR = 9
+    CLUTTER = 10
+
+
+# Label names, in id order, as metrics and the viewer show them.
 LABEL_NAMES: Final[tuple[str, ...]] = (
     "unlabelled",
     "ceiling",
@@ -37,8 +55,8 @@ LABEL_COLORS: Final[tuple[tuple[int, int, int], ...]] = (
     (250, 240, 60),
 )
 NUM_LABELS: Final = len(LABEL_NAMES)
-STRUCTURAL_LABELS: Final = (1, 2, 3)  # ceiling, floor, wall: from planes, not from the network
-OBJECT_LABELS: Final = (4, 5, 6, 7, 8, 9, 10)
+STRUCTURAL_LABELS: Final = (Label.CEILING, Label.FLOOR, Label.WALL)  # planes, not the network
+OBJECT_LABELS: Final = tuple(Label(i) for i in range(Label.TABLE, Label.CLUTTER + 1))
 
 # PASCAL VOC class index -> our label (RECORDING.md). VOC order:
 # 0 background, 1 aeroplane, 2 bicycle, 3 bird, 4 boat, 5 bottle, 6 bus, 7 car, 8 cat, 9 chair,

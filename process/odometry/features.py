@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Intrinsics
+from process.geometry import normalise, project, transform_points
 
 THUMB_SIZE = (32, 24)  # (w, h) of the keyframe thumbnails used for place recognition
 _LIFT_RADIUS = 2  # keypoint depth from the 5x5 neighbourhood
@@ -106,10 +107,7 @@ class FeatureExtractor:
     def normalised(self, xy: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         """Return normalised image coordinates (x/z, y/z) of pixels, undistorted if needed."""
         if self.dist is None:
-            k = self.intrinsics
-            return np.stack([(xy[:, 0] - k.cx) / k.fx, (xy[:, 1] - k.cy) / k.fy], axis=1).astype(
-                np.float32
-            )
+            return normalise(xy.astype(np.float32, copy=False), self.intrinsics)
         und = cv2.undistortPoints(
             xy.reshape(-1, 1, 2).astype(np.float64), self.camera_matrix, self.dist
         )
@@ -153,10 +151,9 @@ def visible_share(
     """Return the share of points (their own frame) that a camera sees inside its image."""
     if len(points) == 0:
         return 0.0
-    rot = camera_from_points[:3, :3].astype(np.float32)
-    p = points @ rot.T + camera_from_points[:3, 3].astype(np.float32)
-    z = np.maximum(p[:, 2], 1e-6)
-    u = p[:, 0] / z * intr.fx + intr.cx
-    v = p[:, 1] / z * intr.fy + intr.cy
-    inside = (p[:, 2] > 0) & (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
+    p = transform_points(camera_from_points, points)
+    front = p[:, 2] > 0
+    p[:, 2] = np.maximum(p[:, 2], 1e-6)
+    u, v = project(p, intr).T
+    inside = front & (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
     return float(inside.mean())

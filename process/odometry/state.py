@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from process.odometry_locate import Located
+from process.odometry.locate import Located
 
 
 @dataclass(frozen=True, slots=True)

@@ -4,11 +4,12 @@ Per frame (`Odometry.track`): ORB features are matched to the reference keyframe
 have depth, by projection around the pose a constant-velocity model predicts (all against all when
 there is no prediction); PnP RANSAC, with the prediction as a second hypothesis, gives the pose;
 Gauss-Newton refines it on the inliers' reprojection and the current depth
-(process.odometry_locate). Open3D's RGB-D odometry on half-size images then refines it densely
-(process.odometry_dense). A frame becomes a keyframe when it has moved or turned enough, sees too
+(process.odometry.locate). Open3D's RGB-D odometry on half-size images then refines it densely
+(process.odometry.dense). A frame becomes a keyframe when it has moved or turned enough, sees too
 little of the reference, or keeps too few inliers; it enters a pose graph. New keyframes are
 compared with old ones (thumbnail similarity and pose proximity, verified by PnP); a loop closure
-adds an edge and the graph is optimised (GTSAM, sparse: process.loop_closure). When tracking fails
+adds an edge and the graph is optimised (GTSAM, sparse: process.odometry.loop_closure).
+When tracking fails
 the odometry tries the recent keyframes and, after a while, starts a new segment; each of these is
 an event on the timeline. Every pose is stored relative to its keyframe, so `finish()` returns all
 frames after the last optimisation. Memory grows with keyframes (features, a thumbnail: <= 80 kB
@@ -26,12 +27,12 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Intrinsics, RgbdFrame
-from process.loop_closure import PoseGraph
-from process.odometry_config import OdometryConfig
-from process.odometry_dense import DenseAligner
-from process.odometry_features import FeatureExtractor, Keyframe
-from process.odometry_state import TrackState
-from process.odometry_tracker import Tracker
+from process.odometry.config import OdometryConfig
+from process.odometry.dense import DenseAligner
+from process.odometry.features import FeatureExtractor, Keyframe
+from process.odometry.pose_graph import PoseGraph
+from process.odometry.state import TrackState
+from process.odometry.tracker import Tracker
 
 __all__ = ["Odometry", "OdometryConfig", "TrackResult"]
 

@@ -14,9 +14,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from capture import ros_msgs as m
 from capture.errors import RecordingError
-from capture.frames import Extrinsics, GroundTruth, Intrinsics, RgbdFrame
+from capture.recording import messages as m
+from capture.recording.frames import Extrinsics, GroundTruth, Intrinsics, RgbdFrame
 
 COLOR_ENCODINGS: Final = {
     "rgb8": (3, False),

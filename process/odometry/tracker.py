@@ -9,16 +9,18 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import RgbdFrame
-from process.loop_closure import Edge, LoopCloser, PoseGraph
-from process.odometry_dense import DenseAligner, pose_difference
-from process.odometry_features import FeatureExtractor, Keyframe, thumbnail
-from process.odometry_keyframes import needs_keyframe, refine_densely
-from process.odometry_locate import Located, Locator
-from process.odometry_pnp import information_from_points, rigid_inverse
-from process.odometry_state import TrackState, match_arrays
+from process.geometry import rigid_inverse
+from process.odometry.dense import DenseAligner, pose_difference
+from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
+from process.odometry.keyframes import needs_keyframe, refine_densely
+from process.odometry.locate import Located, Locator
+from process.odometry.loop_closure import LoopCloser
+from process.odometry.pnp import information_from_points
+from process.odometry.pose_graph import Edge, PoseGraph
+from process.odometry.state import TrackState, match_arrays
 
 if TYPE_CHECKING:
-    from process.odometry_config import OdometryConfig
+    from process.odometry.config import OdometryConfig
 
 __all__ = ["TrackState", "Tracker"]
 
@@ -37,7 +39,7 @@ class _Image:
 
 
 class Tracker:
-    """Track frames against keyframes and keep the pose graph; see process.odometry."""
+    """Track frames against keyframes and keep the pose graph; see process.odometry.odometry."""
 
     def __init__(
         self,

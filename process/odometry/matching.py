@@ -8,6 +8,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import Intrinsics
+from process.geometry import project, transform_points
 
 _GUIDED_NEIGHBOURS = 32  # nearest current keypoints compared with each projected reference
 _MAX_HAMMING = 64  # of 256 bits: ORB descriptors further apart are not the same point
@@ -33,17 +34,9 @@ def guided_match(
     empty = np.zeros(0, np.int64), np.zeros(0, np.int64)
     if len(points) == 0 or len(xy) < 2:
         return empty
-    p = points @ camera_from_points[:3, :3].T.astype(np.float32) + camera_from_points[:3, 3].astype(
-        np.float32
-    )
+    p = transform_points(camera_from_points, points.astype(np.float32, copy=False))
     front = np.flatnonzero(p[:, 2] > 0.05)
-    uv = np.stack(
-        [
-            p[front, 0] / p[front, 2] * intrinsics.fx + intrinsics.cx,
-            p[front, 1] / p[front, 2] * intrinsics.fy + intrinsics.cy,
-        ],
-        axis=1,
-    )
+    uv = project(p[front], intrinsics)
     k = min(_GUIDED_NEIGHBOURS, len(xy))
     dist_px, near = cKDTree(xy).query(uv, k=k, distance_upper_bound=radius_px)
     valid = np.isfinite(dist_px)

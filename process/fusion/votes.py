@@ -12,7 +12,8 @@ import numpy.typing as npt
 from capture.recording import NUM_LABELS, Intrinsics
 from process.cloud import LabelledCloud
 from process.errors import ConfigError, StageError
-from process.fusion_tsdf import TsdfSurface
+from process.fusion.tsdf import TsdfSurface
+from process.geometry import normalise
 
 logger = logging.getLogger(__name__)
 
@@ -74,7 +75,7 @@ def _rays(
         )
         xy = np.asarray(undistorted, np.float64).reshape(-1, 2)
     else:
-        xy = (uv - (intrinsics.cx, intrinsics.cy)) / np.array((intrinsics.fx, intrinsics.fy))
+        xy = normalise(uv, intrinsics)
     flat = (v.ravel() * intrinsics.width + u.ravel()).astype(np.intp)
     return xy, flat
 

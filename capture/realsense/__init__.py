@@ -1,0 +1,1 @@
+"""The only pyrealsense2 user: device and streams, the recording session and its writer thread."""

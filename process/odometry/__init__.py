@@ -1,0 +1,1 @@
+"""Visual odometry: tracking, keyframes, relocalisation, loop closure and the pose graph."""
