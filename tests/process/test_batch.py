@@ -311,3 +311,28 @@ def test_a_folder_not_written_by_batch_is_left_alone(recordings: Path, tmp_path:
         "was not written by batch (no batch.json); move it away or choose another --out"
     )
     assert [p.name for p in mine.parent.iterdir()] == ["notes.txt"]
+
+
+def _die() -> None:
+    import os
+
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_worker_that_dies_is_a_failed_row(recordings: Path, tmp_path: Path) -> None:
+    import multiprocessing
+
+    from process.batch.local import _collect
+    from process.batch.tasks import Task
+
+    task = Task(recordings / "sim1.mcap", "sim1", tmp_path, load_config(None), ("odometry",))
+    task.partial_dir.mkdir()
+    ctx = multiprocessing.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_die)
+    child.start()
+    send.close()
+    row = _collect(receive, child, task)
+    assert row["status"] == "failed" and row["name"] == "sim1"
+    assert row["reason"] == "worker process died (killed by SIGKILL; out of memory?)"
+    assert not task.partial_dir.exists()
