@@ -81,39 +81,26 @@ def run_batch(
         ConfigError: bad inputs or options.
         RunInterruptedError: Ctrl-C or SIGTERM; the summary lists what finished.
     """
-    if executor not in EXECUTORS:
-        raise ConfigError(f"unknown executor {executor!r}; valid: {', '.join(EXECUTORS)}")
-    if jobs is not None and jobs < 1:
-        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
-    recordings = find_recordings(inputs)
-    n_jobs = min(jobs or default_jobs(cfg.batch.memory_gb_per_task), len(recordings))
-    cores = len(os.sched_getaffinity(0))
-    threads = max(1, int(cfg.batch.cpus_per_task)) if executor == "ray" else max(1, cores // n_jobs)
-    tasks = [
-        Task(rec, rec.stem, out, cfg, stages, weights, device, no_viz, threads)
-        for rec in recordings
-    ]
+    tasks, n_jobs = _plan(
+        inputs, out, cfg, stages, weights, device, no_viz, jobs=jobs, executor=executor
+    )
     out.mkdir(parents=True, exist_ok=True)
-    rows: dict[str, dict[str, Any]] = {}
-    for task in tasks:
-        done = completed_row(task)
-        if done is not None:
-            rows[task.name] = done
+    rows = {t.name: row for t in tasks if (row := completed_row(t)) is not None}
     todo = [t for t in tasks if t.name not in rows]
+    progress = BatchProgress(len(tasks), reused=len(rows))
 
     def finished(row: dict[str, Any]) -> None:
         rows[row["name"]] = row
         progress.done(row)
         _write(out, tasks, rows)
 
-    progress = BatchProgress(len(tasks), reused=len(rows))
     try:
         with progress:
-            if executor == "local":
+            if todo and executor == "local":
                 from process.batch.local import run_local
 
                 run_local(todo, jobs=n_jobs, on_start=progress.start, on_done=finished)
-            else:
+            elif todo:
                 from process.batch.ray_exec import run_ray
 
                 run_ray(
@@ -126,16 +113,44 @@ def run_batch(
     except KeyboardInterrupt as err:
         for task in todo:
             if task.name not in rows:
-                rows[task.name] = summary.failed_row(
-                    task.name, task.recording, "not finished: the batch was interrupted"
-                )
-        _write(out, tasks, rows)
-        n_ok = sum(r["status"] == "ok" for r in rows.values())
+                reason = "not finished: the batch was interrupted"
+                rows[task.name] = summary.failed_row(task.name, task.recording, reason)
+        n_ok = sum(r["status"] == "ok" for r in _write(out, tasks, rows))
         raise RunInterruptedError(
             f"interrupted: {n_ok} of {len(tasks)} recordings complete in {out}; rerun the same"
             " command to process the rest"
         ) from err
     return _write(out, tasks, rows)
+
+
+def _plan(
+    inputs: Sequence[str],
+    out: Path,
+    cfg: ReplayConfig,
+    stages: tuple[str, ...],
+    weights: Path | None,
+    device: str,
+    no_viz: bool,
+    *,
+    jobs: int | None,
+    executor: str,
+) -> tuple[list[Task], int]:
+    """Return one task per recording and how many run at once here (local executor)."""
+    if executor not in EXECUTORS:
+        raise ConfigError(f"unknown executor {executor!r}; valid: {', '.join(EXECUTORS)}")
+    if jobs is not None and jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
+    recordings = find_recordings(inputs)
+    n_jobs = min(jobs or default_jobs(cfg.batch.memory_gb_per_task), len(recordings))
+    if executor == "ray":
+        threads = max(1, int(cfg.batch.cpus_per_task))
+    else:
+        threads = max(1, len(os.sched_getaffinity(0)) // n_jobs)
+    tasks = [
+        Task(rec, rec.stem, out, cfg, stages, weights, device, no_viz, threads)
+        for rec in recordings
+    ]
+    return tasks, n_jobs
 
 
 def _write(
