@@ -122,11 +122,15 @@ def batch(
     out: Annotated[Path, typer.Option("--out", help="output folder: OUT/<name>/ per recording")],
     config: Annotated[Path | None, typer.Option(help="TOML config overriding the defaults")] = None,
     jobs: Annotated[
-        int | None, typer.Option(help="local tasks at once [default: cores, as memory allows]")
+        int | None,
+        typer.Option(help="local tasks at once (default: one per core, as memory allows)"),
     ] = None,
     executor: Annotated[str, typer.Option(help="local | ray")] = "local",
     address: Annotated[
-        str | None, typer.Option(help="Ray cluster address, e.g. auto [default: a local one]")
+        str | None,
+        typer.Option(
+            help="Ray cluster address, e.g. auto (default: a running one, else a local one)"
+        ),
     ] = None,
     stages: Annotated[str, typer.Option(help="as for run")] = "refinement",
     weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
@@ -139,6 +143,8 @@ def batch(
     from process.errors import ReplayError
 
     _setup_logging(verbose)
+    if device not in ("auto", "cpu", "cuda"):
+        raise typer.BadParameter(f"{device!r}; valid: auto, cpu, cuda", param_hint="--device")
     try:
         from process.batch.runner import run_batch
         from process.config import load_config, resolve_stages
