@@ -98,6 +98,9 @@ def process_one(task: Task) -> dict[str, Any]:
         reason = str(err)
     except Exception as err:  # any other failure is this recording's, not the batch's
         reason = f"{type(err).__name__}: {err}"
+    except BaseException:  # interrupted outside the pipeline (which says RunInterruptedError)
+        shutil.rmtree(task.partial_dir, ignore_errors=True)
+        raise
     shutil.rmtree(task.partial_dir, ignore_errors=True)
     wall_s = round(time.perf_counter() - t0, 3)
     return summary.failed_row(task.name, task.recording, reason, wall_s=wall_s, host=host)
