@@ -26,8 +26,9 @@ from scipy.spatial.transform import Rotation
 from benchmarks.common import Row
 from capture.recording import Intrinsics, RecordingReader, RgbdFrame
 from process.depth import DepthConfig, DepthProcessor, register_depth
-from process.odometry.odometry import Odometry, OdometryConfig
-from process.trajectory import ate_rmse, path_length
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry
+from process.trajectory import Trajectory, ate_rmse, path_length
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 SIM_SEED = 3
@@ -58,7 +59,7 @@ def _ours(seq: Sequence) -> tuple[npt.NDArray[np.float64], float]:
         odometry.track(frame, depth)
     trajectory = odometry.finish()
     seconds = time.perf_counter() - t0 + seq.depth_s
-    return np.array([p for _, p in trajectory]), seconds
+    return trajectory.poses, seconds
 
 
 def _open3d(seq: Sequence) -> tuple[npt.NDArray[np.float64], float]:
@@ -161,8 +162,9 @@ def _odometry_rows(seq: Sequence, *, with_fps: bool) -> list[Row]:
     length = path_length(seq.gt)
     ours, ours_s = _ours(seq)
     ref, ref_s = _open3d(seq)
-    ate_ours = ate_rmse((seq.stamps, ours), (seq.stamps, seq.gt))
-    ate_ref = ate_rmse((seq.stamps, ref), (seq.stamps, seq.gt))
+    truth = Trajectory(seq.stamps, seq.gt)
+    ate_ours = ate_rmse(Trajectory(seq.stamps, ours), truth)
+    ate_ref = ate_rmse(Trajectory(seq.stamps, ref), truth)
     source = "Open3D frame-to-frame RGB-D odometry, same run"
     rows = [
         Row(

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import logging
 import signal
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import TYPE_CHECKING, Annotated, NoReturn
 
 import typer
+
+if TYPE_CHECKING:
+    import threading
+
+    from viz.rerun_log import LiveViewer
 
 app = typer.Typer(
     help="Replay an MCAP recording offline: odometry, segmentation, fusion, refinement.",
@@ -24,6 +30,8 @@ Examples:
   semreplay-process run rec.mcap --out out --stages odometry --no-viz
 
   semreplay-process run rec.mcap --out out --config samples/sample.toml --weights ckpt.pt
+
+  semreplay-process run field.mcap --out live --follow --serve   # while `record` writes it
 """
 
 
@@ -35,6 +43,18 @@ def _fail(message: str) -> NoReturn:
 def _interrupt(signum: int, frame: object) -> NoReturn:
     """Treat SIGTERM as Ctrl-C, so that a killed run cleans up the same way."""
     raise KeyboardInterrupt
+
+
+def _stop_following(stop: threading.Event) -> Callable[[int, object], None]:
+    """Return a SIGINT handler: the first Ctrl-C ends the capture here, the second aborts."""
+
+    def handler(signum: int, frame: object) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+        typer.echo("\nstopping: finishing with the frames so far (Ctrl-C again aborts)", err=True)
+
+    return handler
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -58,6 +78,24 @@ def run(
     weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
     device: Annotated[str, typer.Option(help="auto | cpu | cuda")] = "auto",
     no_viz: Annotated[bool, typer.Option("--no-viz", help="do not write recording.rrd")] = False,
+    follow: Annotated[
+        bool,
+        typer.Option(
+            "--follow",
+            help="process a recording that is still being written, until the capture ends"
+            " (Ctrl-C: stop and finish with the frames so far)",
+        ),
+    ] = False,
+    follow_idle: Annotated[
+        float, typer.Option(min=0.5, help="--follow: seconds without new data that end a capture")
+    ] = 10.0,
+    serve: Annotated[
+        bool, typer.Option("--serve", help="also stream the log to viewers on 127.0.0.1:--port")
+    ] = False,
+    spawn: Annotated[
+        bool, typer.Option("--spawn", help="also stream the log to a native viewer it starts")
+    ] = False,
+    port: Annotated[int, typer.Option(min=1, max=65535, help="--serve/--spawn gRPC port")] = 9876,
     verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
 ) -> None:
     """Replay REC.mcap through the stages and write the outputs to --out."""
@@ -67,10 +105,27 @@ def run(
     _setup_logging(verbose)
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"{device!r}; valid: auto, cpu, cuda", param_hint="--device")
-    if not recording.is_file():
+    if not recording.is_file() and not follow:
         _fail(f"recording not found: {recording}")
+    if (serve or spawn) and no_viz:
+        raise typer.BadParameter(
+            "--serve/--spawn stream the log: drop --no-viz", param_hint="--no-viz"
+        )
+    from viz.rerun_log import LiveViewer
+
+    live = LiveViewer(spawn=spawn, port=port) if serve or spawn else None
     try:
-        _run(recording, out, config, stages, weights, device, no_viz)
+        _run(
+            recording,
+            out,
+            config,
+            stages,
+            weights,
+            device,
+            no_viz,
+            follow_idle_s=follow_idle if follow else None,
+            live=live,
+        )
     except (ReplayError, CaptureError) as err:
         _fail(str(err))
 
@@ -83,7 +138,12 @@ def _run(
     weights: Path | None,
     device: str,
     no_viz: bool,
+    *,
+    follow_idle_s: float | None = None,
+    live: LiveViewer | None = None,
 ) -> None:
+    import threading
+
     from rich.console import Console
 
     from process import outputs
@@ -92,9 +152,24 @@ def _run(
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)
+    if live is not None:
+        typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
+    stop = threading.Event()
     signal.signal(signal.SIGTERM, _interrupt)
+    if follow_idle_s is not None:
+        signal.signal(signal.SIGINT, _stop_following(stop))
+        typer.echo(f"following {recording}: frames are processed as they are written", err=True)
     result = run_recording(
-        recording, out, cfg=cfg, stages=stage_list, weights=weights, device=device, no_viz=no_viz
+        recording,
+        out,
+        cfg=cfg,
+        stages=stage_list,
+        weights=weights,
+        device=device,
+        no_viz=no_viz,
+        live=live,
+        follow_idle_s=follow_idle_s,
+        stop=stop,
     )
     console = Console(stderr=False)
     console.print(outputs.summary_table(result.metrics))
@@ -201,7 +276,9 @@ def refine(
         out.mkdir(parents=True, exist_ok=True)
         outputs.write_text_atomic(out / outputs.CONFIG, to_toml(cfg))
         metrics = refine_file(cloud, out_dir=out, cfg=cfg.refine, gt_cloud=ground_truth)
-        Console().print(outputs.summary_table({"refinement": metrics}))
+        Console().print(
+            outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
+        )
         typer.echo(f"outputs in {out}: {outputs.MAP_REFINED}, {outputs.METRICS}, {outputs.CONFIG}")
     except ReplayError as err:
         _fail(str(err))

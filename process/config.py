@@ -12,7 +12,7 @@ from typing import Any, Final
 from process.depth import DepthConfig
 from process.errors import ConfigError
 from process.fusion.votes import FusionConfig
-from process.odometry.odometry import OdometryConfig
+from process.odometry.config import OdometryConfig
 from process.refine import RefineConfig
 from process.segmentation.config import SegmentationConfig
 

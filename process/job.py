@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from process import outputs
 from process.config import ReplayConfig
 from process.errors import RunInterruptedError
 from process.pipeline import ReplayPipeline, RunResult
+
+if TYPE_CHECKING:
+    import threading
+
+    from viz.rerun_log import LiveViewer
 
 
 def run_recording(
@@ -20,8 +26,14 @@ def run_recording(
     device: str = "auto",
     no_viz: bool = False,
     progress: bool = True,
+    live: LiveViewer | None = None,
+    follow_idle_s: float | None = None,
+    stop: threading.Event | None = None,
 ) -> RunResult:
     """Replay `recording` through `stages` into `out`; every output is written whole or not at all.
+
+    `live` also streams the log to a viewer; `follow_idle_s` follows a recording still being
+    written (setting `stop` ends it with the frames so far).
 
     Raises:
         RunInterruptedError: Ctrl-C stopped the run; complete files stay, no partial one.
@@ -35,7 +47,7 @@ def run_recording(
     viz = (
         NullLogger()
         if no_viz
-        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem)
+        else RerunLogger(outputs.temporary_path(rrd), recording_name=recording.stem, live=live)
     )
     pipeline = ReplayPipeline(
         recording,
@@ -46,6 +58,8 @@ def run_recording(
         weights=weights,
         device=device,
         progress=progress,
+        follow_idle_s=follow_idle_s,
+        stop=stop,
     )
     try:
         result = pipeline.run()

@@ -77,14 +77,28 @@ def write_metrics(path: Path, metrics: Mapping[str, Any]) -> None:
     write_text_atomic(path, json.dumps(_finite(metrics), indent=2, sort_keys=False) + "\n")
 
 
-def summary_table(metrics: Mapping[str, Any]) -> Table:
+def summary_table(metrics: Mapping[str, Any], *, title: str = "semreplay process run") -> Table:
     """Return one table of timings and, where present, the metrics against ground truth."""
-    table = Table(title="semreplay process run")
+    table = Table(title=title)
     table.add_column("stage")
     table.add_column("figure")
     table.add_column("value", justify="right")
+    stages = metrics.get("stages", {})
     for stage, seconds in metrics.get("seconds", {}).items():
-        table.add_row(stage, "time (s)", f"{seconds:.2f}")
+        figures = stages.get(stage, {})
+        text = f"{seconds:.2f} s wall"
+        if figures.get("cpu_s") is not None:
+            text += f", {figures['cpu_s']:.2f} s CPU"
+        if figures.get("fps") is not None:
+            text += f", {figures['fps']:.1f} frames/s"
+        table.add_row(stage, "time", text)
+    job = metrics.get("job", {})
+    if job.get("fps") is not None:
+        table.add_row("whole job", "frames/s", f"{job['fps']:.1f} ({job['cores_used']} cores used)")
+        slowest = max(job["bottleneck_share"].items(), key=lambda kv: kv[1])
+        table.add_row(
+            "whole job", "bottleneck", f"{slowest[0]} ({100 * slowest[1]:.0f} % of the run)"
+        )
     odo = metrics.get("odometry", {})
     for key in ("frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"):
         if odo.get(key) is not None:

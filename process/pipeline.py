@@ -1,33 +1,46 @@
-"""ReplayPipeline: a recording through odometry, segmentation, fusion and refinement, streamed."""
+"""ReplayPipeline: a recording through odometry, segmentation, fusion and refinement, in one pass.
+
+The odometry runs on the calling thread, frame after frame. Keyframes go to a worker thread that
+segments and fuses them, and every logging call goes to a thread that encodes and writes the
+`.rrd` (process.streaming, viz.background); bounded queues keep memory flat. Keyframes are fused
+at their pose when tracked; if loop closures later move them, the map is fused again at the
+final poses from the keyframes the fusion kept on disk (process.fusion.keyframes).
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import os
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 from tqdm import tqdm
 
-from capture.recording import (
-    GT_CLOUD_ATTACHMENT,
-    LABEL_NAMES,
-    RecordingReader,
-    RgbdFrame,
-)
+from capture.recording import GT_CLOUD_ATTACHMENT, LABEL_NAMES, RecordingReader, RgbdFrame
 from process import outputs
+from process.cloud import LabelledCloud, write_ply
 from process.config import ReplayConfig, to_toml
 from process.depth import DepthProcessor
 from process.evaluate import class_counts, confusion_matrix, ratios
-from process.odometry.odometry import Odometry
-from process.trajectory import ate_rmse, path_length, rpe, write_tum
+from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
+from process.odometry.odometry import Odometry, TrackResult
+from process.streaming import Worker
+from process.trajectory import Trajectory, ate_rmse, path_length, rpe, write_tum
+from viz.background import BackgroundLogger
 from viz.layout import STAGE_FUSED
 from viz.logger import Logger
+
+if TYPE_CHECKING:
+    from process.segmentation.segmenter import Segmenter
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +52,16 @@ class RunResult:
     out_dir: Path
     written: list[Path] = field(default_factory=list)
     metrics: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class _Keyframe:
+    """A tracked keyframe on its way to segmentation and fusion."""
+
+    frame: RgbdFrame
+    depth_m: npt.NDArray[np.float32]  # (H, W) registered to colour
+    keyframe_id: int
+    world_from_camera: npt.NDArray[np.float64]  # (4, 4) when tracked
 
 
 class ReplayPipeline:
@@ -55,232 +78,330 @@ class ReplayPipeline:
         weights: Path | None = None,
         device: str = "auto",
         progress: bool = True,
+        follow_idle_s: float | None = None,
+        stop: threading.Event | None = None,
     ) -> None:
         self.recording = recording
+        self.follow_idle_s = follow_idle_s  # follow a recording still being written
+        self.stop = stop or threading.Event()  # set: stop following and finish with what came
         self.out_dir = out_dir
         self.cfg = cfg
         self.stages = stages
-        self.viz = viz
+        self.viz = BackgroundLogger(viz)
         self.weights = weights
         self.device = device
         self.progress = progress
         self.result = RunResult(out_dir)
-        self._seconds: dict[str, float] = {}
-        self._anchor: npt.NDArray[np.float64] | None = None  # map world from the first camera
-        self._keyframe_stamps: set[int] = set()
-        self._segmenter: Any = None
+        self.clock = _StageClock()
+        self._frames = 0
+        self._odometry: Odometry | None = None
+        self._segmenter: Segmenter | None = None
+        self._seg_stats = _SegStats()
+        self._fusion = KeyframeFusion(cfg.fusion) if "fusion" in stages else None
+        self._keyframes: Worker[_Keyframe] = Worker("keyframes", self._on_keyframe)
+        self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
+        self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
+        wall0, cpu0 = time.perf_counter(), time.process_time()
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self._write_config()
-        with RecordingReader(self.recording) as rec:
-            if not rec.has_ground_truth:
-                self.viz.log_text(
-                    "recording has no ground truth: metrics against it are skipped", level="INFO"
+        try:
+            reader = RecordingReader(
+                self.recording, follow_idle_s=self.follow_idle_s, stop=self.stop
+            )
+            with reader as rec:
+                self._note_ground_truth(rec)
+                ground_truth = self._replay(rec)
+                gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
+            trajectory = self._finish_odometry(ground_truth)
+            self._keyframes.join()
+            if self._segmenter is not None:
+                self.result.metrics["segmentation"] = self._seg_stats.summary(
+                    self.clock.wall.get("segmentation", 0.0)
                 )
-                logger.info("no ground truth in %s: metrics against it are skipped", self.recording)
-            trajectory, gt_poses = self._replay_frames(rec)
-            self._finish_odometry(trajectory, gt_poses)
-            if "fusion" in self.stages:
-                cloud = self._fuse(rec, trajectory)
-            gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
-        if "fusion" in self.stages:
-            self._write_cloud(outputs.MAP_FUSED, cloud)
-            self.viz.set_stage(STAGE_FUSED)
-            self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
-            if "refinement" in self.stages and len(cloud) == 0:
-                note = (
-                    "the fused map is empty: no keyframe pixel had depth within fusion's"
-                    f" {self.cfg.fusion.min_depth_m:g}..{self.cfg.fusion.max_depth_m:g} m;"
-                    " refinement is skipped (check [fusion] and the recording's depth)"
-                )
-                self.viz.log_text(note, level="WARN")
-                logger.warning(note)
-            elif "refinement" in self.stages:
-                self._refine(cloud, gt_cloud)
-        self.result.metrics["seconds"] = {k: round(v, 3) for k, v in self._seconds.items()}
+            if self._fusion is not None and self._odometry is not None:
+                self._map(trajectory, gt_cloud, up=self._odometry.world_from_first[:3, 1] * -1.0)
+        except BaseException:
+            self._stop_threads(failed=True)
+            raise
+        self._stop_threads(failed=False)
+        self._record_times(time.perf_counter() - wall0, time.process_time() - cpu0)
         path = self.out_dir / outputs.METRICS
         outputs.write_metrics(path, self.result.metrics)
         self.result.written.append(path)
         return self.result
 
-    # -- per frame ---------------------------------------------------------------------------
-    def _replay_frames(
-        self, rec: RecordingReader
-    ) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
+    def _stop_threads(self, *, failed: bool) -> None:
+        """Stop the keyframe and logging threads; after a failure, keep the first error."""
+        for stop in (self._keyframes.join, self.viz.close):
+            try:
+                stop()
+            except Exception:
+                if not failed:
+                    raise
+                logger.debug("a background thread failed too", exc_info=True)
+        if self._fusion is not None:
+            self._fusion.close()
+
+    # -- the pass over the frames ------------------------------------------------------------
+    def _replay(self, rec: RecordingReader) -> Trajectory:
+        """Track every frame; hand keyframes to the worker; return the ground-truth poses."""
         depth = DepthProcessor(self.cfg.depth)
-        odometry: Odometry | None = None
-        segmenter = self._make_segmenter() if "segmentation" in self.stages else None
-        self._segmenter = segmenter
-        gt_poses: list[tuple[int, Any]] = []
-        self._seg_stats = _SegStats()
-        frames = tqdm(
-            rec.frames(),
-            total=len(rec),
-            unit="frame",
-            dynamic_ncols=True,
-            disable=not self.progress,
-        )
-        self._frames = 0  # counted here: a disabled tqdm (progress=False) does not count
-        for frame in frames:
+        if "segmentation" in self.stages:
+            self._segmenter = self._make_segmenter()
+        _limit_threads()
+        gt_stamps: list[int] = []
+        gt_poses: list[npt.NDArray[np.float64]] = []
+        total = None if rec.following else len(rec)
+        bar = tqdm(total=total, unit="frame", dynamic_ncols=True, disable=not self.progress)
+        with bar:  # closed on errors too, so that an error line starts a line of its own
+            for frame in self._timed_frames(rec):
+                gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
+                if gt_pose is not None:
+                    gt_stamps.append(frame.stamp_ns)
+                    gt_poses.append(gt_pose)
+                self._track(frame, depth, gt_pose)
+                bar.update()
+                if rec.following:
+                    self._lag_s.append((time.time_ns() - frame.stamp_ns) / 1e9)
+        return Trajectory.of(gt_stamps, gt_poses)
+
+    def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
+        """Yield the recording's frames, timing the reading and decoding as its own stage."""
+        frames = rec.frames()
+        while True:
+            with self.clock("read"):
+                frame = next(frames, None)
+            if frame is None:
+                return
             self._frames += 1
-            if odometry is None:
-                odometry = Odometry(self.cfg.odometry, intrinsics=frame.color_intrinsics)
-                self.viz.log_calibration(frame.color_intrinsics)
-            self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-            with self._timer("depth"):
-                depth_m = depth.process(frame)
-            gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
-            if self._anchor is None:
-                # The map's world is the recording's world where it has a first pose (so the map
-                # meets the ground-truth cloud), else the first camera.
-                self._anchor = np.eye(4) if gt_pose is None else gt_pose
-            with self._timer("odometry"):
-                track = odometry.track(frame, depth_m)
-            world_from_camera = self._anchor @ track.world_from_camera
-            images = track.is_keyframe or frame.index % self.cfg.viz.images_every_n == 0
-            if images:
-                self.viz.log_frame(frame)
-                if not frame.aligned:
-                    self.viz.log_registered_depth(depth_m)
-            self._log_track(track, world_from_camera, keypoints=images)
-            if gt_pose is not None:
-                gt_poses.append((frame.stamp_ns, gt_pose))
-            if segmenter is not None and track.is_keyframe:
-                self._keyframe(frame, segmenter)
-        self._odometry = odometry
-        trajectory = odometry.finish() if odometry is not None else []
-        anchor = np.eye(4) if self._anchor is None else self._anchor
-        return [(stamp, anchor @ pose) for stamp, pose in trajectory], gt_poses
+            yield frame
 
-    @contextmanager
-    def _timer(self, stage: str) -> Iterator[None]:
-        """Add the block's wall time to the stage's total and log it on the timeline."""
-        t0 = time.perf_counter()
-        yield
-        dt = time.perf_counter() - t0
-        self._seconds[stage] = self._seconds.get(stage, 0.0) + dt
-        self.viz.log_timing(stage, dt)
-
-    def _log_track(
-        self, track: Any, world_from_camera: npt.NDArray[np.float64], *, keypoints: bool
+    def _track(
+        self, frame: RgbdFrame, depth: DepthProcessor, gt_pose: npt.NDArray[np.float64] | None
     ) -> None:
-        self.viz.log_pose(world_from_camera, keyframe=track.is_keyframe)
-        if keypoints:  # only over the image they belong to
-            self.viz.log_keypoints(track.keypoints_xy, inliers=track.inlier_mask)
-        self.viz.log_tracking(track.n_inliers, status=track.status, event=track.event)
+        if self._odometry is None:
+            # The map's world is the recording's world where it has a first pose (so the map
+            # meets the ground-truth cloud), else the first camera.
+            self._odometry = Odometry(
+                self.cfg.odometry, intrinsics=frame.color_intrinsics, world_from_first=gt_pose
+            )
+            self.viz.log_calibration(frame.color_intrinsics)
+        self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
+        with self.clock("depth"):
+            depth_m = depth.process(frame)
+        with self.clock("odometry"):
+            track = self._odometry.track(frame, depth_m)
+        self._log_frame(frame, depth_m, track)
+        if track.is_keyframe and self._segmenter is not None:
+            kf = _Keyframe(frame, depth_m, track.state.keyframe_id, track.world_from_camera)
+            self._keyframe_stamps[kf.keyframe_id] = frame.stamp_ns
+            self._keyframes.submit(kf)
 
-    def _make_segmenter(self) -> Any:
+    def _log_frame(
+        self, frame: RgbdFrame, depth_m: npt.NDArray[np.float32], track: TrackResult
+    ) -> None:
+        images = track.is_keyframe or frame.index % self.cfg.viz.images_every_n == 0
+        if images:
+            self.viz.log_frame(frame)
+            if not frame.aligned:
+                self.viz.log_registered_depth(depth_m)
+        self.viz.log_pose(track.world_from_camera, keyframe=track.is_keyframe)
+        if images:  # keypoints only over the image they belong to
+            self.viz.log_keypoints(track.state.keypoints_xy, inliers=track.state.inlier_mask)
+        state = track.state
+        self.viz.log_tracking(state.n_inliers, status=state.status, event=state.event)
+
+    # -- the keyframe worker (its own thread) ------------------------------------------------
+    def _make_segmenter(self) -> Segmenter:
         from process.segmentation import Segmenter
 
-        return Segmenter(self.cfg.segmentation, weights=self.weights, device=self.device)
+        cfg = self.cfg.segmentation
+        if cfg.threads == 0:  # leave a core to the odometry
+            cfg = dataclasses.replace(cfg, threads=max(1, (os.cpu_count() or 2) - 1))
+        return Segmenter(cfg, weights=self.weights, device=self.device)
 
-    def _keyframe(self, frame: RgbdFrame, segmenter: Any) -> None:
-        with self._timer("segmentation"):
-            seg = segmenter.segment(frame.color)
+    def _on_keyframe(self, kf: _Keyframe) -> None:
+        assert self._segmenter is not None  # keyframes are queued only with a segmenter
+        frame = kf.frame
+        self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
+        with self.clock("segmentation"):
+            seg = self._segmenter.segment(frame.color)
         self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
         gt = frame.ground_truth
         if gt is not None and gt.labels is not None:
             self._seg_stats.add(seg.labels, gt.labels)
         self._seg_stats.keyframes += 1
-        self._keyframe_stamps.add(frame.stamp_ns)
-
-    def _fuse(self, rec: RecordingReader, trajectory: list[tuple[int, Any]]) -> Any:
-        """Fuse the keyframes at their final poses: a second pass over the recording.
-
-        The final poses include the loop closures found after a keyframe was tracked; keeping
-        the keyframes' images until then would make memory grow with the recording, reading
-        them again does not. Segmenting a keyframe again costs ~20 ms.
-        """
-        from process.fusion.votes import Fusion
-
-        fusion = Fusion(self.cfg.fusion)
-        depth = DepthProcessor(self.cfg.depth)
-        world_from_camera = dict(trajectory)
-        with self._timer("fusion"):
-            for frame in rec.frames():
-                if frame.stamp_ns not in self._keyframe_stamps:
-                    continue
-                seg = self._segmenter.segment(frame.color)
-                fusion.integrate(
-                    frame.color,
-                    depth.process(frame),
-                    seg.labels,
-                    seg.confidence,
-                    intrinsics=frame.color_intrinsics,
-                    world_from_camera=world_from_camera[frame.stamp_ns],
-                )
-        return fusion.cloud()
+        if self._fusion is not None:
+            labelled = LabelledKeyframe(
+                kf.keyframe_id,
+                frame.color,
+                kf.depth_m,
+                seg.labels,
+                seg.confidence,
+                frame.color_intrinsics,
+            )
+            with self.clock("fusion"):
+                self._fusion.add(labelled, world_from_camera=kf.world_from_camera)
 
     # -- after the frames ----------------------------------------------------------------
-    def _finish_odometry(
-        self, trajectory: list[tuple[int, Any]], gt_poses: list[tuple[int, Any]]
-    ) -> None:
-        stamps = [s for s, _ in trajectory]
-        poses = [p for _, p in trajectory]
+    def _note_ground_truth(self, rec: RecordingReader) -> None:
+        if not rec.has_ground_truth:
+            self.viz.log_text(
+                "recording has no ground truth: metrics against it are skipped", level="INFO"
+            )
+            logger.info("no ground truth in %s: metrics against it are skipped", self.recording)
+
+    def _finish_odometry(self, ground_truth: Trajectory) -> Trajectory:
+        with self.clock("odometry"):
+            trajectory = (
+                self._odometry.finish() if self._odometry is not None else Trajectory.of([], [])
+            )
         path = self.out_dir / outputs.TRAJECTORY
-        write_tum(path, stamps, poses)
+        write_tum(path, trajectory)
         self.result.written.append(path)
-        self.viz.log_trajectory(
-            "estimated", np.array(stamps, np.int64), np.array([p[:3, 3] for p in poses])
-        )
-        seconds = self._seconds.get("odometry", 0.0) + self._seconds.get("depth", 0.0)
+        self.viz.log_trajectory("estimated", trajectory.stamps_ns, trajectory.positions)
         odo: dict[str, Any] = {
             "frames": self._frames,
-            "keyframes": int(getattr(self._odometry, "n_keyframes", 0)),
-            "fps": round(self._frames / seconds, 2) if seconds > 0 else None,
+            "keyframes": 0 if self._odometry is None else self._odometry.n_keyframes,
         }
-        if gt_poses:
-            gt_stamps = np.array([s for s, _ in gt_poses], np.int64)
-            self.viz.log_trajectory(
-                "ground_truth", gt_stamps, np.array([p[:3, 3] for _, p in gt_poses])
-            )
-            est = (np.array(stamps, np.int64), np.array(poses))
-            ref = (gt_stamps, np.array([p for _, p in gt_poses]))
-            odo["ate_rmse_m"] = ate_rmse(est, ref)
-            odo["rpe_trans_m"], odo["rpe_rot_deg"] = rpe(est, ref)
-            odo["path_length_m"] = path_length(ref[1])
+        if len(ground_truth):
+            self.viz.log_trajectory("ground_truth", ground_truth.stamps_ns, ground_truth.positions)
+            odo["ate_rmse_m"] = ate_rmse(trajectory, ground_truth)
+            odo["rpe_trans_m"], odo["rpe_rot_deg"] = rpe(trajectory, ground_truth)
+            odo["path_length_m"] = path_length(ground_truth.poses)
             self.viz.log_metrics("odometry", {k: v for k, v in odo.items() if isinstance(v, float)})
         self.result.metrics["odometry"] = odo
-        if "segmentation" in self.stages:
-            self.result.metrics["segmentation"] = self._seg_stats.summary(
-                self._seconds.get("segmentation", 0.0)
+        return trajectory
+
+    def _map(
+        self, trajectory: Trajectory, gt_cloud: bytes | None, *, up: npt.NDArray[np.float64]
+    ) -> None:
+        """Fuse at the final keyframe poses, write the map and refine it.
+
+        `up` hints world up: the first camera's -y (optical y points down). Refinement replaces
+        it by the normal of the largest plane within 30 degrees of it, so a camera held a little
+        tilted at the start still gives a level floor.
+        """
+        assert self._fusion is not None
+        pose_at = dict(zip(trajectory.stamps_ns.tolist(), trajectory.poses, strict=True))
+        poses = {kf: pose_at[stamp] for kf, stamp in self._keyframe_stamps.items()}
+        with self.clock("fusion"):
+            cloud = self._fusion.cloud(poses)
+        if self._fusion.refused:
+            self.viz.log_text("loop closures moved keyframes: the map was fused again")
+        self._write_cloud(outputs.MAP_FUSED, cloud)
+        self.viz.set_stage(STAGE_FUSED)
+        self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
+        if "refinement" not in self.stages:
+            return
+        if len(cloud) == 0:
+            note = (
+                "the fused map is empty: no keyframe pixel had depth within fusion's"
+                f" {self.cfg.fusion.min_depth_m:g}..{self.cfg.fusion.max_depth_m:g} m;"
+                " refinement is skipped (check [fusion] and the recording's depth)"
             )
+            self.viz.log_text(note, level="WARN")
+            logger.warning(note)
+            return
+        self._refine(cloud, gt_cloud, up=up)
 
-    def _write_cloud(self, name: str, cloud: Any) -> None:
-        from process.cloud import write_ply
-
+    def _write_cloud(self, name: str, cloud: LabelledCloud) -> None:
         path = self.out_dir / name
         write_ply(path, cloud)
         self.result.written.append(path)
 
-    def _refine(self, cloud: Any, gt_cloud_ply: bytes | None) -> None:
+    def _refine(
+        self, cloud: LabelledCloud, gt_cloud_ply: bytes | None, *, up: npt.NDArray[np.float64]
+    ) -> None:
+        """Refine the map and write it."""
         from process.refine.job import refine_and_log
 
-        t0 = time.perf_counter()
-        refined, section = refine_and_log(
-            cloud, self.cfg.refine, viz=self.viz, up=self._up_vector(), gt_cloud_ply=gt_cloud_ply
-        )
-        self._seconds["refinement"] = time.perf_counter() - t0
+        with self.clock("refinement"):
+            refined, section = refine_and_log(
+                cloud, self.cfg.refine, viz=self.viz, up=up, gt_cloud_ply=gt_cloud_ply
+            )
         self._write_cloud(outputs.MAP_REFINED, refined)
         self.result.metrics["refinement"] = section
 
-    def _up_vector(self) -> npt.NDArray[np.float64] | None:
-        """Return a hint of world up: the first camera's -y axis (optical y points down).
-
-        Refinement replaces it by the normal of the largest plane within 30 degrees of it, so a
-        camera held a little tilted at the start still gives a level floor.
-        """
-        if self._anchor is None:
-            return None
-        up: npt.NDArray[np.float64] = self._anchor[:3, :3] @ np.array([0.0, -1.0, 0.0])
-        return up
+    def _record_times(self, wall_s: float, cpu_s: float) -> None:
+        """Put wall time, CPU time and frames/s per stage and for the job into the metrics."""
+        self.clock.add("logging", self.viz.seconds, self.viz.cpu_seconds)
+        n = self._frames
+        per_stage = {
+            stage: {
+                "wall_s": round(wall, 3),
+                "cpu_s": round(self.clock.cpu[stage], 3),
+                "fps": round(n / wall, 2) if wall > 0 and stage not in _ONCE else None,
+            }
+            for stage, wall in self.clock.wall.items()
+        }
+        self.result.metrics["seconds"] = {k: v["wall_s"] for k, v in per_stage.items()}
+        self.result.metrics["stages"] = per_stage
+        keyframes_behind = self._keyframes.blocked_seconds / wall_s if wall_s > 0 else 0.0
+        logging_behind = self.viz.blocked_seconds / wall_s if wall_s > 0 else 0.0
+        self.result.metrics["job"] = {
+            "frames": n,
+            "wall_s": round(wall_s, 3),
+            "cpu_s": round(cpu_s, 3),
+            "fps": round(n / wall_s, 2) if wall_s > 0 else None,
+            "cores_used": round(cpu_s / wall_s, 2) if wall_s > 0 else None,
+            # the share of the run the frame loop waited for a later stage (that stage was the
+            # bottleneck); the rest of the time the frame loop itself was
+            "bottleneck_share": {
+                "keyframes": round(keyframes_behind, 3),
+                "logging": round(logging_behind, 3),
+                "frame loop": round(max(0.0, 1.0 - keyframes_behind - logging_behind), 3),
+            },
+        }
+        if self._lag_s:
+            lag = np.array(self._lag_s)
+            self.result.metrics[
+                "follow"
+            ] = {  # seconds behind the camera, when each frame was tracked
+                "lag_s_median": round(float(np.median(lag)), 3),
+                "lag_s_p95": round(float(np.percentile(lag, 95)), 3),
+                "lag_s_max": round(float(lag.max()), 3),
+            }
+        odo = self.result.metrics.get("odometry")
+        seconds = self.clock.wall.get("odometry", 0.0) + self.clock.wall.get("depth", 0.0)
+        if odo is not None:
+            odo["fps"] = round(n / seconds, 2) if seconds > 0 else None
 
     def _write_config(self) -> None:
         path = self.out_dir / outputs.CONFIG
         outputs.write_text_atomic(path, to_toml(self.cfg))
         self.result.written.append(path)
+
+
+_ONCE = frozenset({"refinement"})  # stages that run once per job: no frames/s
+
+
+def _limit_threads() -> None:
+    """Leave the second core to the keyframe and logging threads: OpenCV's pool would take it."""
+    cv2.setNumThreads(max(1, (os.cpu_count() or 2) - 1))
+
+
+class _StageClock:
+    """Wall and CPU time per stage, added from any thread (each stage from one thread)."""
+
+    def __init__(self) -> None:
+        self.wall: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, stage: str) -> Iterator[None]:
+        t0, c0 = time.perf_counter(), time.thread_time()
+        try:
+            yield
+        finally:
+            self.add(stage, time.perf_counter() - t0, time.thread_time() - c0)
+
+    def add(self, stage: str, wall_s: float, cpu_s: float) -> None:
+        self.wall[stage] = self.wall.get(stage, 0.0) + wall_s
+        self.cpu[stage] = self.cpu.get(stage, 0.0) + cpu_s
 
 
 class _SegStats:

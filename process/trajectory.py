@@ -9,6 +9,7 @@ the estimate onto the ground truth, and RPE compares consecutive relative motion
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,23 +19,50 @@ from scipy.spatial.transform import Rotation
 from process.errors import ReplayError
 from process.outputs import write_text_atomic
 
-StampedPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]  # (N,) ns, (N, 4, 4)
-
 _NS_PER_S = 1_000_000_000
 
 
-def write_tum(
-    path: Path, stamps_ns: Sequence[int], poses: Sequence[npt.NDArray[np.float64]]
-) -> None:
-    """Write `timestamp tx ty tz qx qy qz qw` lines (seconds, camera-to-world) atomically."""
-    path = Path(path)
-    if len(stamps_ns) != len(poses):
-        raise ReplayError(
-            f"expected one pose per stamp, found {len(stamps_ns)} stamps and {len(poses)} poses;"
-            f" pass matching lists: {path}"
+@dataclass(frozen=True, slots=True)
+class Trajectory:
+    """Camera poses over time: world_from_camera (colour optical frame) at each stamp."""
+
+    stamps_ns: npt.NDArray[np.int64]  # (N,)
+    poses: npt.NDArray[np.float64]  # (N, 4, 4)
+
+    def __post_init__(self) -> None:
+        n = len(self.stamps_ns)
+        if self.stamps_ns.shape != (n,) or self.poses.shape != (n, 4, 4):
+            raise ReplayError(
+                f"expected N stamps and N 4x4 poses, found stamps {self.stamps_ns.shape} and"
+                f" poses {self.poses.shape}; build it with Trajectory.of()"
+            )
+
+    @staticmethod
+    def of(stamps_ns: Sequence[int], poses: Sequence[npt.ArrayLike]) -> Trajectory:
+        """Return the trajectory of stamps and poses given as sequences of the same length."""
+        if len(stamps_ns) != len(poses):
+            raise ReplayError(
+                f"expected one pose per stamp, found {len(stamps_ns)} stamps and {len(poses)}"
+                " poses; pass matching lists"
+            )
+        return Trajectory(
+            np.asarray(stamps_ns, np.int64).reshape(-1),
+            np.asarray(poses, np.float64).reshape(-1, 4, 4),
         )
+
+    def __len__(self) -> int:
+        return len(self.stamps_ns)
+
+    @property
+    def positions(self) -> npt.NDArray[np.float64]:
+        """Return the (N, 3) camera positions in the world frame."""
+        return self.poses[:, :3, 3]
+
+
+def write_tum(path: Path, trajectory: Trajectory) -> None:
+    """Write `timestamp tx ty tz qx qy qz qw` lines (seconds, camera-to-world) atomically."""
     lines = [
-        _tum_line(int(s), np.asarray(p, np.float64)) for s, p in zip(stamps_ns, poses, strict=True)
+        _tum_line(int(s), p) for s, p in zip(trajectory.stamps_ns, trajectory.poses, strict=True)
     ]
     write_text_atomic(path, "# timestamp tx ty tz qx qy qz qw\n" + "".join(lines))
 
@@ -51,7 +79,7 @@ def _tum_line(stamp_ns: int, pose: npt.NDArray[np.float64]) -> str:
     )
 
 
-def read_tum(path: Path) -> StampedPoses:
+def read_tum(path: Path) -> Trajectory:
     """Read a TUM trajectory file into (stamps_ns, world_from_camera poses)."""
     path = Path(path)
     stamps: list[int] = []
@@ -76,7 +104,7 @@ def read_tum(path: Path) -> StampedPoses:
     if len(data):
         poses[:, :3, :3] = Rotation.from_quat(data[:, 3:]).as_matrix()
         poses[:, :3, 3] = data[:, :3]
-    return np.array(stamps, np.int64), poses
+    return Trajectory(np.array(stamps, np.int64), poses)
 
 
 def _seconds_to_ns(text: str) -> int:
@@ -109,19 +137,19 @@ def associate(
 
 
 def associate_trajectories(
-    est: StampedPoses, gt: StampedPoses, *, max_dt_ns: int = 10_000_000
+    est: Trajectory, gt: Trajectory, *, max_dt_ns: int = 10_000_000
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Return the (est, gt) poses paired in time, matching from the shorter one like evo."""
-    if len(est[0]) <= len(gt[0]):
-        i_est, i_gt = associate(est[0], gt[0], max_dt_ns=max_dt_ns)
+    if len(est) <= len(gt):
+        i_est, i_gt = associate(est.stamps_ns, gt.stamps_ns, max_dt_ns=max_dt_ns)
     else:
-        i_gt, i_est = associate(gt[0], est[0], max_dt_ns=max_dt_ns)
+        i_gt, i_est = associate(gt.stamps_ns, est.stamps_ns, max_dt_ns=max_dt_ns)
     if len(i_est) == 0:
         raise ReplayError(
-            f"no time stamps of the estimate ({len(est[0])}) and the ground truth ({len(gt[0])})"
+            f"no time stamps of the estimate ({len(est)}) and the ground truth ({len(gt)})"
             f" lie within {max_dt_ns / 1e6:g} ms of each other; are both in the same clock?"
         )
-    return np.asarray(est[1], np.float64)[i_est], np.asarray(gt[1], np.float64)[i_gt]
+    return est.poses[i_est], gt.poses[i_gt]
 
 
 def align_umeyama(
@@ -150,7 +178,7 @@ def align_umeyama(
     return out, scale
 
 
-def ate_rmse(est: StampedPoses, gt: StampedPoses, *, max_dt_ns: int = 10_000_000) -> float:
+def ate_rmse(est: Trajectory, gt: Trajectory, *, max_dt_ns: int = 10_000_000) -> float:
     """Return the absolute trajectory error (RMSE of positions, metres) after SE(3) alignment."""
     e, g = associate_trajectories(est, gt, max_dt_ns=max_dt_ns)
     if len(e) < 3:
@@ -161,7 +189,7 @@ def ate_rmse(est: StampedPoses, gt: StampedPoses, *, max_dt_ns: int = 10_000_000
 
 
 def rpe(
-    est: StampedPoses, gt: StampedPoses, *, delta: int = 1, max_dt_ns: int = 10_000_000
+    est: Trajectory, gt: Trajectory, *, delta: int = 1, max_dt_ns: int = 10_000_000
 ) -> tuple[float, float]:
     """Return the relative pose error over `delta` frames: (trans RMSE m, rotation RMSE deg)."""
     e, g = associate_trajectories(est, gt, max_dt_ns=max_dt_ns)

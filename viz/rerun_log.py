@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import uuid
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
@@ -30,6 +31,19 @@ _POINT_RADIUS: Final = rr.Radius.ui_points(1.5)
 _PALETTE: Final = layout.cluster_palette()
 
 
+@dataclass(frozen=True, slots=True)
+class LiveViewer:
+    """Stream the log to a viewer as it is written: spawn a native one, or serve on a port."""
+
+    spawn: bool = False
+    port: int = 9876
+
+    @property
+    def url(self) -> str:
+        """Return the address a viewer connects to: `rerun URL`, or the web viewer's ?url=."""
+        return f"rerun+http://127.0.0.1:{self.port}/proxy"
+
+
 class RerunLogger(NullLogger):
     """A `Logger` that writes an `.rrd` file with the blueprint of `viz.layout`."""
 
@@ -40,13 +54,20 @@ class RerunLogger(NullLogger):
         application_id: str = layout.APPLICATION_ID,
         recording_name: str,
         jpeg_quality: int = 90,
+        live: LiveViewer | None = None,
     ) -> None:
         if not 1 <= jpeg_quality <= 100:
             raise ValueError(f"expected jpeg_quality in 1..100, found {jpeg_quality}")
         self._jpeg_quality = jpeg_quality
         self._rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         self._rec.set_log_time_enabled(False)  # only our timelines: wall-clock time means nothing
-        self._rec.save(rrd_path, default_blueprint=layout.blueprint())
+        sinks: list[rr.FileSink | rr.GrpcSink | rr.GrpcServerSink] = [rr.FileSink(rrd_path)]
+        if live is not None and live.spawn:  # a native viewer of its own, fed over gRPC
+            rr.spawn(port=live.port, connect=False, recording=self._rec)
+            sinks.append(rr.GrpcSink(live.url))
+        elif live is not None:  # a gRPC server on this machine that viewers connect to
+            sinks.append(rr.GrpcServerSink(bind_ip="127.0.0.1", port=live.port))
+        self._rec.set_sinks(*sinks, default_blueprint=layout.blueprint())
         self._rec.send_recording_name(recording_name)
         self._rec.log("/", layout.annotation_context(), static=True)
         overlay = layout.annotation_context(unlabelled_alpha=0)  # see the image through label 0

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import IO, Any, cast
 
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Message, Schema
@@ -15,6 +17,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from capture.errors import RecordingError
 from capture.recording import messages as m
+from capture.recording.follow import GrowingFile
 from capture.recording.frames import RgbdFrame
 from capture.recording.index import McapIndex, TopicInfo, read_index, stream_records
 from capture.recording.sync import (
@@ -33,18 +36,30 @@ class RecordingReader:
     """Read a recording as a stream of synchronised `RgbdFrame` values.
 
     Usage: `with RecordingReader(path) as rec: for frame in rec.frames(): ...`.
-    Recordings that were never finished (a killed writer) replay every complete chunk.
+    Recordings that were never finished (a killed writer) replay every complete chunk. With
+    `follow_idle_s`, a recording still being written is followed: frames are yielded as the
+    writer's chunks arrive, until the writer finishes the file, stays idle for that many
+    seconds, or `stop` is set.
     """
 
     def __init__(
-        self, path: Path, *, sync_tolerance_ns: int = 20_000_000, prefer_aligned: bool = True
+        self,
+        path: Path,
+        *,
+        sync_tolerance_ns: int = 20_000_000,
+        prefer_aligned: bool = True,
+        follow_idle_s: float | None = None,
+        stop: threading.Event | None = None,
     ) -> None:
         self.path = Path(path)
         self.sync_tolerance_ns = sync_tolerance_ns
         self.prefer_aligned = prefer_aligned
+        self.follow_idle_s = follow_idle_s
+        self.stop = stop or threading.Event()
         self.unpaired_color_frames = 0
         self._index = McapIndex()
         self._stream: IO[bytes] | None = None
+        self._growing: GrowingFile | None = None  # the same stream, when following
         self._decoders = DecoderFactory()
 
     # -- opening ---------------------------------------------------------------------------
@@ -62,6 +77,9 @@ class RecordingReader:
 
     def open(self) -> None:
         """Open the file, read its summary (or scan it if unfinished) and find its topics."""
+        if self.follow_idle_s is not None:
+            self._open_following(self.follow_idle_s)
+            return
         try:
             self._stream = self.path.open("rb")
         except OSError as err:
@@ -72,6 +90,30 @@ class RecordingReader:
         except RecordingError:
             self.close()
             raise
+
+    def _open_following(self, idle_s: float) -> None:
+        """Wait until the writer has written the topics a replay needs, then follow the file."""
+        last: RecordingError | None = None
+        deadline = time.monotonic() + idle_s
+        while time.monotonic() < deadline and not self.stop.is_set():
+            try:
+                with self.path.open("rb") as stream:
+                    self._index = read_index(stream, self.path)
+                self._topics = self._discover()
+                break
+            except (RecordingError, OSError) as err:
+                last = err if isinstance(err, RecordingError) else RecordingError(str(err))
+                time.sleep(0.1)
+        else:
+            raise RecordingError(
+                f"followed the recording for {idle_s:g} s and found no complete frame topics"
+                f" ({last}); is the capture running?: {self.path}"
+            )
+        if not self.finished:
+            self._growing = GrowingFile(self.path, idle_s=idle_s, stop=self.stop)
+            self._stream = cast(IO[bytes], self._growing)  # read, seek and tell are all it needs
+        else:
+            self._stream = self.path.open("rb")
 
     def close(self) -> None:
         """Close the file."""
@@ -128,6 +170,11 @@ class RecordingReader:
         return Topics(color, color_info, depth, depth_info, use_aligned, extrinsics, metadata, gt)
 
     # -- properties --------------------------------------------------------------------------
+    @property
+    def following(self) -> bool:
+        """Return whether frames come from a recording that is still being written."""
+        return self._growing is not None
+
     @property
     def finished(self) -> bool:
         """Return whether the file was finished (has a summary) rather than recovered."""
@@ -255,6 +302,9 @@ class RecordingReader:
                 self.sync_tolerance_ns / 1e6,
                 self.path,
             )
+        if self.following:  # the writer may have finished: read what the file says now
+            with self.path.open("rb") as stream:
+                self._index = read_index(stream, self.path)
         if not self.finished:
             logger.warning(
                 "recording was not finished (writer killed?); recovered %d frames: %s",

@@ -14,7 +14,7 @@ CSV: Final = "summary.csv"
 PARQUET: Final = "summary.parquet"
 PREVIEW: Final = "preview.png"  # written by `process run` where it makes one
 MARKER: Final = "batch.json"  # a folder's row, written last: the folder is complete
-STAGES: Final = ("depth", "odometry", "segmentation", "fusion", "refinement")
+STAGES: Final = ("read", "depth", "odometry", "segmentation", "fusion", "refinement", "logging")
 PHASES: Final = ("I", "II", "III")
 
 # Column name -> type; the order is the order of the CSV and Parquet columns.
@@ -30,7 +30,8 @@ COLUMNS: Final[dict[str, type]] = {
     "rpe_rot_deg": float,
     "miou_2d": float,
     **{f"map_f1_{phase}": float for phase in PHASES},
-    **{f"seconds_{stage}": float for stage in STAGES},
+    **{f"seconds_{stage}": float for stage in STAGES},  # wall time of each stage
+    "fps": float,  # frames/s of the whole job
     "wall_s": float,  # the whole task, from start to the folder in place
     "peak_rss_gb": float,  # the task's own high-water mark
     "reused": bool,  # true: the folder was complete from an earlier run and kept
@@ -73,6 +74,7 @@ def ok_row(
         rpe_trans_m=odo.get("rpe_trans_m"),
         rpe_rot_deg=odo.get("rpe_rot_deg"),
         miou_2d=metrics.get("segmentation", {}).get("miou_2d"),
+        fps=metrics.get("job", {}).get("fps"),
         out_dir=str(out_dir),
         **{f"map_f1_{p}": phases.get(p, {}).get("all", {}).get("f1") for p in PHASES},
         **{f"seconds_{s}": seconds.get(s) for s in STAGES},

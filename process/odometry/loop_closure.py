@@ -76,16 +76,13 @@ def find_loop(
 class LoopCloser:
     """Search each new keyframe's place among old keyframes; on a match, optimise the graph."""
 
-    def __init__(
-        self, cfg: OdometryConfig, *, pnp: PnpSolver, graph: PoseGraph, keyframes: list[Keyframe]
-    ) -> None:
+    def __init__(self, cfg: OdometryConfig, *, pnp: PnpSolver, graph: PoseGraph) -> None:
         self.cfg = cfg
         self.pnp = pnp
         self.graph = graph
-        self.keyframes = keyframes
         self._cooldown = 0
 
-    def close(self, kf: Keyframe) -> str:
+    def close(self, kf: Keyframe, keyframes: Sequence[Keyframe]) -> str:
         """Return a description of the loop closed from this keyframe, or "" if none was."""
         cfg = self.cfg
         if not cfg.loop_closure:
@@ -95,14 +92,14 @@ class LoopCloser:
             return ""
         ids = loop_candidates(
             kf,
-            self.keyframes,
+            keyframes,
             poses=self.graph.poses,
             min_gap=cfg.loop_min_gap,
             count=cfg.loop_candidates,
             min_similarity=cfg.loop_min_similarity,
             radius_m=cfg.loop_search_radius_m,
         )
-        candidates = [self.keyframes[i] for i in ids]
+        candidates = [keyframes[i] for i in ids]
         found = find_loop(
             kf,
             candidates,

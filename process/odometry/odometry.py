@@ -19,7 +19,7 @@ keyframe keeps images.
 
 from __future__ import annotations
 
-import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -33,37 +33,41 @@ from process.odometry.features import FeatureExtractor, Keyframe
 from process.odometry.pose_graph import PoseGraph
 from process.odometry.state import TrackState
 from process.odometry.tracker import Tracker
-
-__all__ = ["Odometry", "OdometryConfig", "TrackResult"]
+from process.trajectory import Trajectory
 
 
 @dataclass(frozen=True, slots=True)
 class TrackResult:
-    """What the odometry made of one frame; enough to draw it on the timeline."""
+    """What the odometry made of one frame: its world pose and the tracker's verdict."""
 
     index: int
     stamp_ns: int
-    world_from_camera: npt.NDArray[
-        np.float64
-    ]  # (4, 4) colour optical frame; first keyframe = identity
-    is_keyframe: bool
-    keyframe_id: int  # the keyframe this frame was tracked against (-1 before initialisation)
-    status: str  # "ok" | "lost" | "relocalised" | "new_segment" | "frozen"
-    n_inliers: int
-    keypoints_xy: npt.NDArray[np.float32]  # (N, 2) this frame's ORB keypoints, pixels
-    inlier_mask: npt.NDArray[np.bool_]  # (N,) PnP inliers among keypoints_xy
-    matched_keyframe_xy: npt.NDArray[np.float32]  # (N, 2) matched keyframe keypoint, NaN if none
-    event: str | None  # a one-line note for the timeline (loss, relocalisation, loop closure ...)
-    seconds: float  # time spent in track()
-    trajectory_corrected: bool = False  # a loop closure moved earlier poses: redraw the trajectory
+    world_from_camera: npt.NDArray[np.float64]  # (4, 4) colour optical frame, in the map's world
+    state: TrackState  # keyframe, status, inliers, keypoints, event
+
+    @property
+    def is_keyframe(self) -> bool:
+        """Return whether this frame became a keyframe."""
+        return self.state.is_keyframe
 
 
 class Odometry:
-    """Track an RGB-D stream, one frame at a time; `finish()` returns every optimised pose."""
+    """Track an RGB-D stream, one frame at a time; `finish()` returns every optimised pose.
 
-    def __init__(self, cfg: OdometryConfig, *, intrinsics: Intrinsics) -> None:
+    Poses are in the map's world: `world_from_first` places the first camera (the recording's
+    ground-truth pose where it has one, so the map meets the ground-truth cloud; else identity).
+    """
+
+    def __init__(
+        self,
+        cfg: OdometryConfig,
+        *,
+        intrinsics: Intrinsics,
+        world_from_first: npt.NDArray[np.float64] | None = None,
+    ) -> None:
         self.cfg = cfg
         self.intrinsics = intrinsics
+        self.world_from_first = np.eye(4) if world_from_first is None else world_from_first
         extractor = FeatureExtractor(
             intrinsics,
             n_features=cfg.n_features,
@@ -81,56 +85,55 @@ class Odometry:
             quick_iterations=cfg.dense_frame_iterations,
             method=cfg.dense_method,
         )
-        self.graph = PoseGraph()
-        self.keyframes: list[Keyframe] = []
-        self._tracker = Tracker(
-            cfg, extractor=extractor, dense=dense, graph=self.graph, keyframes=self.keyframes
-        )
-        self._frames: list[
-            tuple[int, int, npt.NDArray[np.float64]]
-        ] = []  # stamp, keyframe, kf_from_camera
+        self._tracker = Tracker(cfg, extractor=extractor, dense=dense)
+        self._frames: list[tuple[int, int, npt.NDArray[np.float64]]] = []  # stamp, kf, kf_from_cam
+
+    @property
+    def graph(self) -> PoseGraph:
+        """Return the keyframe pose graph (poses relative to the first camera)."""
+        return self._tracker.graph
+
+    @property
+    def keyframes(self) -> Sequence[Keyframe]:
+        """Return the keyframes, read-only (the tracker owns and extends them)."""
+        return self._tracker.keyframes
 
     @property
     def n_keyframes(self) -> int:
         """Return how many keyframes the odometry has made."""
-        return len(self.keyframes)
+        return len(self._tracker.keyframes)
+
+    def keyframe_pose(self, keyframe_id: int) -> npt.NDArray[np.float64]:
+        """Return the latest world_from_camera of a keyframe (it moves when a loop closes)."""
+        return self.world_from_first @ self.graph.poses[keyframe_id]
 
     def track(self, frame: RgbdFrame, depth_m: npt.NDArray[np.float32]) -> TrackResult:
         """Estimate the pose of one frame from its colour and its depth in the colour camera."""
-        t0 = time.perf_counter()
         gray = np.asarray(cv2.cvtColor(frame.color, cv2.COLOR_RGB2GRAY), np.uint8)
-        state: TrackState = self._tracker.step(gray, np.asarray(depth_m, np.float32), frame)
+        state = self._tracker.step(gray, np.asarray(depth_m, np.float32), frame)
         self._frames.append((frame.stamp_ns, state.keyframe_id, state.keyframe_from_camera))
-        world = (
-            self.graph.poses[state.keyframe_id] @ state.keyframe_from_camera
-            if state.keyframe_id >= 0
-            else np.eye(4)
-        )
         return TrackResult(
-            index=frame.index,
-            stamp_ns=frame.stamp_ns,
-            world_from_camera=world,
-            is_keyframe=state.is_keyframe,
-            keyframe_id=state.keyframe_id,
-            status=state.status,
-            n_inliers=state.n_inliers,
-            keypoints_xy=state.keypoints_xy,
-            inlier_mask=state.inlier_mask,
-            matched_keyframe_xy=state.matched_keyframe_xy,
-            event=state.event,
-            seconds=time.perf_counter() - t0,
-            trajectory_corrected=state.trajectory_corrected,
+            frame.index,
+            frame.stamp_ns,
+            self._world(state.keyframe_id, state.keyframe_from_camera),
+            state,
         )
 
-    def finish(self) -> list[tuple[int, npt.NDArray[np.float64]]]:
-        """Optimise the graph a last time; return (stamp_ns, world_from_camera) of every frame."""
+    def finish(self) -> Trajectory:
+        """Optimise the graph a last time; return the world pose of every frame."""
         if self.cfg.loop_closure and self.graph.n_loops > 0:
             self.graph.optimise(
                 max_correspondence_m=self.cfg.loop_max_correspondence_m,
                 prune_threshold=self.cfg.loop_prune_threshold,
             )
-        out = []
-        for stamp_ns, kf, kf_from_camera in self._frames:
-            world = self.graph.poses[kf] @ kf_from_camera if kf >= 0 else np.eye(4)
-            out.append((stamp_ns, world))
-        return out
+        return Trajectory.of(
+            [stamp for stamp, _, _ in self._frames],
+            [self._world(kf, kf_from_camera) for _, kf, kf_from_camera in self._frames],
+        )
+
+    def _world(
+        self, keyframe_id: int, kf_from_camera: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.float64]:
+        if keyframe_id < 0:  # before initialisation
+            return self.world_from_first.copy()
+        return self.keyframe_pose(keyframe_id) @ kf_from_camera

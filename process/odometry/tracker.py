@@ -47,14 +47,12 @@ class Tracker:
         *,
         extractor: FeatureExtractor,
         dense: DenseAligner,
-        graph: PoseGraph,
-        keyframes: list[Keyframe],
     ) -> None:
         self.cfg = cfg
         self.extractor = extractor
         self.dense = dense
-        self.graph = graph
-        self.keyframes = keyframes
+        self.graph = PoseGraph()  # keyframe poses relative to the first camera
+        self.keyframes: list[Keyframe] = []  # owned here; others read it
         self.locator = Locator(cfg, extractor=extractor)
         self._ref: Keyframe | None = None
         self._kf_from_camera = np.eye(4)
@@ -65,7 +63,7 @@ class Tracker:
         self._lost = 0
         self._failure = ""
         self._segment = 0
-        self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=graph, keyframes=keyframes)
+        self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=self.graph)
 
     def step(
         self, gray: npt.NDArray[np.uint8], depth: npt.NDArray[np.float32], frame: RgbdFrame
@@ -230,7 +228,7 @@ class Tracker:
         kf.dense = dense
         support = information_from_points(parent.points[found.train[found.pnp.inliers]])
         self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, support, False))
-        return self.loops.close(kf)
+        return self.loops.close(kf, self.keyframes)
 
     def _initialise(self, image: _Image) -> TrackState:
         kf = self._new_keyframe(image, world_from_keyframe=np.eye(4))

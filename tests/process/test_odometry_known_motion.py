@@ -13,8 +13,9 @@ import pytest
 from helpers_odometry import K_VGA, pose, render, rotation_deg, to_frame
 
 from capture.recording import Intrinsics, RgbdFrame
-from process.odometry.odometry import Odometry, OdometryConfig
-from process.trajectory import ate_rmse
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry
+from process.trajectory import Trajectory, ate_rmse
 
 START = pose((0.3, 0.1, -0.2), yaw_deg=20.0, pitch_deg=-5.0)
 _start = cache(lambda: render(START))
@@ -33,9 +34,9 @@ def _relative_estimate(
     odometry = Odometry(cfg, intrinsics=K_VGA)
     odometry.track(to_frame(first, index=0), first.depth_m)
     result = odometry.track(to_frame(second, index=1), second.depth_m)
-    assert result.status == "ok"
-    assert result.n_inliers > 200
-    assert result.inlier_mask.sum() == result.n_inliers
+    assert result.state.status == "ok"
+    assert result.state.n_inliers > 200
+    assert result.state.inlier_mask.sum() == result.state.n_inliers
     return result.world_from_camera  # the first frame is the identity
 
 
@@ -94,9 +95,7 @@ def test_icl_nuim_frames_track_within_3mm_ate(shared_data: Path) -> None:
     frames, gt = _icl_frames(shared_data / "icl_nuim")
     odometry = Odometry(OdometryConfig(), intrinsics=frames[0].color_intrinsics)
     results = [odometry.track(f, f.depth_m) for f in frames]
-    assert [r.status for r in results] == ["ok"] * 5
+    assert [r.state.status for r in results] == ["ok"] * 5
     out = odometry.finish()
-    stamps = np.array([s for s, _ in out], np.int64)
-    poses = np.array([p for _, p in out])
     # 9.8 cm of motion over 5 frames: the error stays at the millimetre level (a few % of it).
-    assert ate_rmse((stamps, poses), (stamps, gt)) < 0.003
+    assert ate_rmse(out, Trajectory(out.stamps_ns, np.asarray(gt))) < 0.003

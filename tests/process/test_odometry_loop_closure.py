@@ -7,9 +7,10 @@ import numpy.typing as npt
 from helpers_odometry import K_QVGA, loop_poses, render, to_frame, track_all
 from scipy.spatial.transform import Rotation
 
-from process.odometry.odometry import Odometry, OdometryConfig
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry
 from process.odometry.pose_graph import Edge, PoseGraph
-from process.trajectory import ate_rmse
+from process.trajectory import Trajectory, ate_rmse
 
 
 def _circle(n: int) -> list[npt.NDArray[np.float64]]:
@@ -115,12 +116,10 @@ def test_rendered_loop_is_closed() -> None:
     )
     odometry = Odometry(cfg, intrinsics=K_QVGA)
     results = track_all(odometry, frames)
-    assert all(r.status == "ok" for r in results)
-    closures = [r for r in results if r.event and "loop closure" in r.event]
-    assert closures, [r.event for r in results if r.event]
-    assert all(r.trajectory_corrected for r in closures)
+    assert all(r.state.status == "ok" for r in results)
+    closures = [r for r in results if r.state.event and "loop closure" in r.state.event]
+    assert closures, [r.state.event for r in results if r.state.event]
+    assert all(r.state.trajectory_corrected for r in closures)
     assert odometry.graph.n_loops >= 1
     out = odometry.finish()
-    stamps = np.array([s for s, _ in out], np.int64)
-    estimate = np.array([p for _, p in out])
-    assert ate_rmse((stamps, estimate), (stamps, np.array(poses))) < 0.01
+    assert ate_rmse(out, Trajectory(out.stamps_ns, np.array(poses))) < 0.01

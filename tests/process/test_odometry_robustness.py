@@ -11,7 +11,8 @@ from helpers_odometry import K_QVGA, RenderedFrame, pose, render, to_frame, trac
 
 from capture.recording import RgbdFrame
 from process.errors import ConfigError
-from process.odometry.odometry import Odometry, OdometryConfig, TrackResult
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry, TrackResult
 
 
 @cache
@@ -54,9 +55,9 @@ def _position_error(result: TrackResult, view: int) -> float:
 
 def test_frozen_frames_hold_the_pose_and_say_so() -> None:
     odometry, results = _run([0, 1, 1, 1, 2])
-    assert [r.status for r in results] == ["ok", "ok", "frozen", "frozen", "ok"]
-    assert results[2].event is not None and "frozen" in results[2].event
-    assert results[3].event is None  # one event per frozen stretch
+    assert [r.state.status for r in results] == ["ok", "ok", "frozen", "frozen", "ok"]
+    assert results[2].state.event is not None and "frozen" in results[2].state.event
+    assert results[3].state.event is None  # one event per frozen stretch
     np.testing.assert_array_equal(results[2].world_from_camera, results[1].world_from_camera)
     assert _position_error(results[4], 2) < 0.01
     assert len(odometry.finish()) == 5
@@ -64,15 +65,15 @@ def test_frozen_frames_hold_the_pose_and_say_so() -> None:
 
 def test_no_depth_at_the_start_delays_initialisation() -> None:
     _, results = _run(["nodepth:0", 1, 2])
-    assert results[0].status == "lost"
-    assert results[0].event is not None and "cannot initialise" in results[0].event
-    assert results[1].status == "ok" and results[1].is_keyframe
-    assert results[1].event is not None and "initialised at frame 1" in results[1].event
+    assert results[0].state.status == "lost"
+    assert results[0].state.event is not None and "cannot initialise" in results[0].state.event
+    assert results[1].state.status == "ok" and results[1].is_keyframe
+    assert results[1].state.event is not None and "initialised at frame 1" in results[1].state.event
 
 
 def test_a_frame_without_depth_is_still_tracked() -> None:
     _, results = _run([0, "nodepth:2", 3], keyframe_translation_m=0.02)
-    assert [r.status for r in results] == ["ok", "ok", "ok"]
+    assert [r.state.status for r in results] == ["ok", "ok", "ok"]
     assert not results[1].is_keyframe  # no depth: it cannot be a keyframe
     assert _position_error(results[1], 2) < 0.01
     assert _position_error(results[2], 3) < 0.01
@@ -80,23 +81,25 @@ def test_a_frame_without_depth_is_still_tracked() -> None:
 
 def test_textureless_stretch_is_lost_then_relocalised() -> None:
     _, results = _run([0, 1, "grey", "grey", "grey", 2, 3])
-    statuses = [r.status for r in results]
+    statuses = [r.state.status for r in results]
     assert statuses == ["ok", "ok", "lost", "lost", "lost", "relocalised", "ok"]
-    assert results[2].event is not None and "tracking lost at frame 2" in results[2].event
-    assert results[3].event is None
-    assert results[5].event is not None and "after 3 lost frame(s)" in results[5].event
+    assert (
+        results[2].state.event is not None and "tracking lost at frame 2" in results[2].state.event
+    )
+    assert results[3].state.event is None
+    assert results[5].state.event is not None and "after 3 lost frame(s)" in results[5].state.event
     assert _position_error(results[5], 2) < 0.01
-    assert len(results[2].keypoints_xy) == 0 or results[2].n_inliers == 0
+    assert len(results[2].state.keypoints_xy) == 0 or results[2].state.n_inliers == 0
 
 
 def test_long_loss_starts_a_new_segment() -> None:
     odometry, results = _run([0, 1, "grey", "grey", 9, 9, 1], lost_frames_new_segment=3)
-    statuses = [r.status for r in results]
+    statuses = [r.state.status for r in results]
     assert statuses[:5] == ["ok", "ok", "lost", "lost", "new_segment"]
     assert (
         results[4].is_keyframe
-        and results[4].event is not None
-        and "new segment 1" in results[4].event
+        and results[4].state.event is not None
+        and "new segment 1" in results[4].state.event
     )
     # The new segment starts where the camera was last seen.
     np.testing.assert_allclose(
@@ -104,7 +107,7 @@ def test_long_loss_starts_a_new_segment() -> None:
     )
     assert statuses[6] == "relocalised"  # back to a view of the first segment
     trajectory = odometry.finish()
-    assert [s for s, _ in trajectory] == [r.stamp_ns for r in results]
+    assert trajectory.stamps_ns.tolist() == [r.stamp_ns for r in results]
 
 
 def test_only_the_reference_keyframe_keeps_images() -> None:

@@ -10,8 +10,9 @@ import pytest
 
 from capture.recording import RecordingReader
 from process.depth import DepthConfig, DepthProcessor
-from process.odometry.odometry import Odometry, OdometryConfig
-from process.trajectory import ate_rmse, path_length, read_tum, write_tum
+from process.odometry.config import OdometryConfig
+from process.odometry.odometry import Odometry
+from process.trajectory import Trajectory, ate_rmse, path_length, read_tum, write_tum
 
 
 def test_simulated_recording_is_tracked_and_written_for_evo(
@@ -24,7 +25,7 @@ def test_simulated_recording_is_tracked_and_written_for_evo(
         for frame in rec.frames():
             assert not frame.aligned  # the simulator records raw depth: registration runs
             odometry = odometry or Odometry(OdometryConfig(), intrinsics=frame.color_intrinsics)
-            statuses.append(odometry.track(frame, depth.process(frame)).status)
+            statuses.append(odometry.track(frame, depth.process(frame)).state.status)
             assert (
                 frame.ground_truth is not None and frame.ground_truth.world_from_camera is not None
             )
@@ -32,17 +33,16 @@ def test_simulated_recording_is_tracked_and_written_for_evo(
     assert odometry is not None
     assert statuses.count("ok") == len(statuses)
     trajectory = odometry.finish()
-    stamps = np.array([s for s, _ in trajectory], np.int64)
-    poses = np.array([p for _, p in trajectory])
+    stamps, poses = trajectory.stamps_ns, trajectory.poses
     truth = np.array(gt)
     assert path_length(truth) > 0.1
-    assert ate_rmse((stamps, poses), (stamps, truth)) < 0.01 * path_length(truth)
+    assert ate_rmse(trajectory, Trajectory(stamps, truth)) < 0.01 * path_length(truth)
 
     path = tmp_path / "trajectory.tum"
-    write_tum(path, stamps.tolist(), list(poses))
-    read_stamps, read_poses = read_tum(path)
-    assert np.array_equal(read_stamps, stamps)
-    np.testing.assert_allclose(read_poses, poses, atol=1e-8)
+    write_tum(path, trajectory)
+    read = read_tum(path)
+    assert np.array_equal(read.stamps_ns, stamps)
+    np.testing.assert_allclose(read.poses, poses, atol=1e-8)
     if importlib.util.find_spec("evo") is None:
         pytest.skip("evo is not installed: the file was checked with our reader only")
     from evo.tools import file_interface  # type: ignore[import-untyped]

@@ -19,7 +19,7 @@ from process.cloud import read_cloud
 from process.errors import StageError
 from process.odometry.odometry import Odometry
 from process.pipeline import ReplayPipeline
-from process.trajectory import read_tum
+from process.trajectory import Trajectory, read_tum
 
 runner = CliRunner()
 OUTPUTS = (
@@ -99,7 +99,8 @@ def test_the_clouds_load_with_their_label_fields(run_twice: dict[str, Any]) -> N
 def test_the_trajectory_is_tum_and_near_the_ground_truth(
     run_twice: dict[str, Any], sim_recording: Path
 ) -> None:
-    stamps, poses = read_tum(run_twice["out"] / outputs.TRAJECTORY)
+    trajectory = read_tum(run_twice["out"] / outputs.TRAJECTORY)
+    stamps, poses = trajectory.stamps_ns, trajectory.poses
     with RecordingReader(sim_recording) as rec:
         truth = {
             f.stamp_ns: f.ground_truth.world_from_camera for f in rec.frames() if f.ground_truth
@@ -112,7 +113,7 @@ def test_the_trajectory_is_tum_and_near_the_ground_truth(
 
 def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     metrics = json.loads((run_twice["out"] / outputs.METRICS).read_text())
-    assert set(metrics) == {"odometry", "segmentation", "refinement", "seconds"}
+    assert set(metrics) == {"odometry", "segmentation", "refinement", "seconds", "stages", "job"}
     odo = metrics["odometry"]
     assert {"frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"} <= set(odo)
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
@@ -126,6 +127,11 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     for params in metrics["refinement"]["dbscan"].values():
         assert {"k", "eps_m", "min_pts"} <= set(params)
     assert set(metrics["seconds"]) >= {"depth", "odometry", "segmentation", "fusion", "refinement"}
+    for stage, figures in metrics["stages"].items():
+        assert figures["wall_s"] == metrics["seconds"][stage] and figures["cpu_s"] >= 0
+    job = metrics["job"]
+    assert job["frames"] == 30 and job["fps"] == pytest.approx(30 / job["wall_s"], rel=0.01)
+    assert sum(job["bottleneck_share"].values()) == pytest.approx(1.0, abs=0.002)
 
 
 def test_a_recording_without_ground_truth_runs_and_says_so(
@@ -177,7 +183,7 @@ def test_ctrl_c_leaves_no_partial_file_and_says_what_was_written(
     def interrupt(*_: object) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(ReplayPipeline, "_keyframe", interrupt)
+    monkeypatch.setattr(ReplayPipeline, "_on_keyframe", interrupt)
     out = tmp_path / "out"
     result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert result.exit_code == 1
@@ -254,7 +260,7 @@ def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(
     def fail(*_: object) -> None:
         raise StageError("segmentation failed on purpose")
 
-    monkeypatch.setattr(ReplayPipeline, "_keyframe", fail)
+    monkeypatch.setattr(ReplayPipeline, "_on_keyframe", fail)
     out = tmp_path / "out"
     result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert result.exit_code == 1
@@ -269,22 +275,17 @@ def test_fusion_places_keyframes_at_their_final_poses(
     # trajectory. Shift it by 10 m and the whole fused map moves by 10 m.
     finish = Odometry.finish
 
-    def shifted(self: Odometry) -> list[tuple[int, Any]]:
-        out = []
-        for stamp, pose in finish(self):
-            moved = pose.copy()
-            moved[0, 3] += 10.0
-            out.append((stamp, moved))
-        return out
+    def shifted(self: Odometry) -> Trajectory:
+        out = finish(self)
+        moved = out.poses.copy()
+        moved[:, 0, 3] += 10.0
+        return Trajectory(out.stamps_ns, moved)
 
     monkeypatch.setattr(Odometry, "finish", shifted)
     out = tmp_path / "out"
     args = ["run", str(sim_recording), "--out", str(out), "--stages", "fusion", "--no-viz"]
     assert runner.invoke(app, args).exit_code == 0
-    with RecordingReader(sim_recording) as rec:
-        first = next(rec.frames()).ground_truth
-    assert first is not None and first.world_from_camera is not None
-    expected = first.world_from_camera[:3, :3] @ np.array([10.0, 0.0, 0.0])
+    expected = np.array([10.0, 0.0, 0.0])  # the trajectory is in the map's world
     normal = read_cloud(run_twice["out"] / outputs.MAP_FUSED).points.mean(axis=0)
     moved = read_cloud(out / outputs.MAP_FUSED).points.mean(axis=0)
     assert np.allclose(moved - normal, expected, atol=0.05)

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from process.errors import ReplayError
 from process.trajectory import (
+    Trajectory,
     align_umeyama,
     associate,
     associate_trajectories,
@@ -32,7 +33,7 @@ EVO_RPE_ROT_DEG = 0.353613161045
 EVO_PATH_GT_MATCHED_M = 8.015045624496
 
 
-def _fr1(shared_data: Path) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+def _fr1(shared_data: Path) -> tuple[Trajectory, Trajectory]:
     folder = shared_data / "tum_trajectories"
     return read_tum(folder / "freiburg1_xyz-rgbdslam.txt"), read_tum(
         folder / "freiburg1_xyz-groundtruth.txt"
@@ -84,10 +85,10 @@ def test_tum_round_trip_keeps_nanoseconds_and_poses(tmp_path: Path) -> None:
     poses[1][:3, :3] = Rotation.from_euler("xyz", [10, -20, 30], degrees=True).as_matrix()
     poses[1][:3, 3] = [1.5, -2.25, 0.125]
     path = tmp_path / "trajectory.tum"
-    write_tum(path, stamps, poses)
-    read_stamps, read_poses = read_tum(path)
-    assert read_stamps.tolist() == stamps
-    np.testing.assert_allclose(read_poses, np.array(poses), atol=1e-8)
+    write_tum(path, Trajectory.of(stamps, poses))
+    read = read_tum(path)
+    assert read.stamps_ns.tolist() == stamps
+    np.testing.assert_allclose(read.poses, np.array(poses), atol=1e-8)
     assert [p.name for p in tmp_path.iterdir()] == ["trajectory.tum"]  # no temporary left behind
     line = path.read_text().splitlines()[1].split()
     assert line[0] == "1305031098.665900001" and len(line) == 8
@@ -124,8 +125,9 @@ def test_ate_of_a_known_perturbation() -> None:
     moved[:3, :3] = Rotation.from_euler("zyx", [40, -10, 25], degrees=True).as_matrix()
     moved[:3, 3] = [3.0, -1.0, 0.5]
     est = moved @ est  # the estimate lives in its own world frame
-    assert ate_rmse((stamps, est), (stamps, gt)) == pytest.approx(0.02, abs=1e-9)
-    assert ate_rmse((stamps, moved @ gt), (stamps, gt)) == pytest.approx(0.0, abs=1e-9)
+    truth = Trajectory(stamps, gt)
+    assert ate_rmse(Trajectory(stamps, est), truth) == pytest.approx(0.02, abs=1e-9)
+    assert ate_rmse(Trajectory(stamps, moved @ gt), truth) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_rpe_of_a_known_scale_drift() -> None:
@@ -134,7 +136,7 @@ def test_rpe_of_a_known_scale_drift() -> None:
     gt[:, 0, 3] = 0.05 * np.arange(10)  # 5 cm per frame along x
     est = gt.copy()
     est[:, 0, 3] *= 1.1  # 10 % too long steps
-    trans, rot = rpe((stamps, est), (stamps, gt))
+    trans, rot = rpe(Trajectory(stamps, est), Trajectory(stamps, gt))
     assert trans == pytest.approx(0.005, abs=1e-12)
     assert rot == pytest.approx(0.0, abs=1e-9)
     assert path_length(gt) == pytest.approx(0.45)

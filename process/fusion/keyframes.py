@@ -1,0 +1,132 @@
+"""Fusion in one pass: keyframes are fused as they come and fused again if their poses move.
+
+A loop closure moves keyframes after they were fused. Re-reading the recording to fuse them
+again decodes every frame a second time; keeping the keyframes in memory grows with the
+recording. Each fused keyframe is therefore written to a temporary folder instead (colour as
+JPEG, depth in millimetres and labels with their confidence as PNG: ~0.3 MB each), and when the
+final trajectory has moved any of them, the map is rebuilt from those files at the final poses.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Intrinsics
+from process.cloud import LabelledCloud
+from process.errors import StageError
+from process.fusion.votes import Fusion, FusionConfig
+
+_MOVED_ROTATION_RAD: Final = float(np.radians(0.25))
+_JPEG: Final = [cv2.IMWRITE_JPEG_QUALITY, 92]
+_PNG: Final = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+
+
+@dataclass(frozen=True, slots=True)
+class LabelledKeyframe:
+    """One segmented keyframe with its depth in the colour camera."""
+
+    keyframe_id: int
+    color: npt.NDArray[np.uint8]  # (H, W, 3) RGB
+    depth_m: npt.NDArray[np.float32]  # (H, W), registered to colour, 0 = none
+    labels: npt.NDArray[np.uint8]  # (H, W) RECORDING.md ids
+    confidence: npt.NDArray[np.float32]  # (H, W) in 0..1
+    intrinsics: Intrinsics
+
+
+class KeyframeFusion:
+    """Fuse labelled keyframes at their poses; fuse all again when the final poses differ."""
+
+    def __init__(self, cfg: FusionConfig) -> None:
+        self.cfg = cfg
+        self.fusion = Fusion(cfg)
+        self.refused = False  # whether the map was rebuilt at the final poses
+        self._fused_at: dict[int, npt.NDArray[np.float64]] = {}
+        self._intrinsics: dict[int, Intrinsics] = {}
+        self._folder = Path(tempfile.mkdtemp(prefix="semreplay-keyframes-"))
+
+    def add(
+        self, keyframe: LabelledKeyframe, *, world_from_camera: npt.NDArray[np.float64]
+    ) -> None:
+        """Fuse a keyframe at its current pose and keep it for a later rebuild."""
+        self.fusion.integrate(
+            keyframe.color,
+            keyframe.depth_m,
+            keyframe.labels,
+            keyframe.confidence,
+            intrinsics=keyframe.intrinsics,
+            world_from_camera=world_from_camera,
+        )
+        self._fused_at[keyframe.keyframe_id] = world_from_camera.copy()
+        self._intrinsics[keyframe.keyframe_id] = keyframe.intrinsics
+        self._store(keyframe)
+
+    def cloud(self, poses: Mapping[int, npt.NDArray[np.float64]]) -> LabelledCloud:
+        """Return the map at the final keyframe poses, rebuilding it if any keyframe moved."""
+        if any(
+            _moved(at, poses[kf], self.cfg.voxel_size_m / 2) for kf, at in self._fused_at.items()
+        ):
+            self.fusion = Fusion(self.cfg)
+            for kf in sorted(self._fused_at):
+                keyframe = self._load(kf)
+                self.fusion.integrate(
+                    keyframe.color,
+                    keyframe.depth_m,
+                    keyframe.labels,
+                    keyframe.confidence,
+                    intrinsics=keyframe.intrinsics,
+                    world_from_camera=poses[kf],
+                )
+            self.refused = True
+        return self.fusion.cloud()
+
+    def close(self) -> None:
+        """Remove the temporary keyframe files."""
+        shutil.rmtree(self._folder, ignore_errors=True)
+
+    def _store(self, kf: LabelledKeyframe) -> None:
+        depth_mm = np.clip(np.nan_to_num(kf.depth_m) * 1000.0 + 0.5, 0, 65535).astype(np.uint16)
+        conf = np.clip(np.nan_to_num(kf.confidence) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        label_conf = np.dstack([kf.labels, conf, np.zeros_like(conf)])
+        for suffix, image, params in (
+            ("color.jpg", cv2.cvtColor(kf.color, cv2.COLOR_RGB2BGR), _JPEG),
+            ("depth.png", depth_mm, _PNG),
+            ("labels.png", label_conf, _PNG),
+        ):
+            ok, data = cv2.imencode(Path(suffix).suffix, image, params)
+            if not ok:
+                raise StageError(f"could not encode keyframe {kf.keyframe_id}'s {suffix}")
+            (self._folder / f"{kf.keyframe_id}_{suffix}").write_bytes(data.tobytes())
+
+    def _load(self, kf: int) -> LabelledKeyframe:
+        def read(suffix: str, flags: int) -> npt.NDArray[np.generic]:
+            data = np.frombuffer((self._folder / f"{kf}_{suffix}").read_bytes(), np.uint8)
+            return np.asarray(cv2.imdecode(data, flags))
+
+        bgr = read("color.jpg", cv2.IMREAD_COLOR)
+        depth_mm = read("depth.png", cv2.IMREAD_UNCHANGED)
+        label_conf = read("labels.png", cv2.IMREAD_UNCHANGED)
+        return LabelledKeyframe(
+            kf,
+            np.ascontiguousarray(bgr[..., ::-1]).astype(np.uint8),
+            depth_mm.astype(np.float32) / np.float32(1000.0),
+            np.ascontiguousarray(label_conf[..., 0]).astype(np.uint8),
+            label_conf[..., 1].astype(np.float32) / np.float32(255.0),
+            self._intrinsics[kf],
+        )
+
+
+def _moved(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], tolerance_m: float) -> bool:
+    """Return whether two poses differ by more than tolerance_m or a quarter of a degree."""
+    if float(np.linalg.norm(a[:3, 3] - b[:3, 3])) > tolerance_m:
+        return True
+    cos = (float(np.trace(a[:3, :3].T @ b[:3, :3])) - 1.0) / 2.0
+    return float(np.arccos(np.clip(cos, -1.0, 1.0))) > _MOVED_ROTATION_RAD

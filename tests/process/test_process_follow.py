@@ -1,0 +1,74 @@
+"""`process run --follow`: a recording processed while another process writes it at camera speed."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from capture.recording import RecordingReader
+from process import outputs
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _follower(live: Path, out: Path, *extra: str) -> subprocess.Popen[str]:
+    args = [sys.executable, "-m", "process", "run", str(live), "--out", str(out), "--follow"]
+    args += ["--stages", "odometry", "--no-viz", "--follow-idle", "20", *extra]
+    follower = subprocess.Popen(args, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    assert follower.stderr is not None
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:  # start writing once the follower waits for frames
+        line = follower.stderr.readline()
+        if line.startswith("following"):
+            return follower
+        assert line or follower.poll() is None, "the follower ended before following"
+    pytest.fail("the follower never said it was following")
+
+
+def _writer(src: Path, live: Path, speed: float) -> subprocess.Popen[str]:
+    args = [sys.executable, "-m", "benchmarks.live_writer", str(src), str(live)]
+    return subprocess.Popen([*args, "--speed", str(speed)], cwd=ROOT, text=True)
+
+
+@pytest.mark.slow
+def test_follow_processes_every_frame_as_written_and_ends_with_the_capture(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    live, out = tmp_path / "live.mcap", tmp_path / "out"
+    follower = _follower(live, out)
+    writer = _writer(sim_recording, live, speed=0.5)  # 30 frames over 2 s of camera time
+    assert writer.wait(timeout=120) == 0
+    assert follower.wait(timeout=120) == 0
+    metrics = json.loads((out / outputs.METRICS).read_text())
+    with RecordingReader(live) as rec:
+        assert rec.finished and metrics["odometry"]["frames"] == len(rec) == 30
+    lag = metrics["follow"]
+    assert 0 < lag["lag_s_median"] <= lag["lag_s_max"] < 10  # seconds behind the writer
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_following_and_finishes_with_the_frames_so_far(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    live, out = tmp_path / "live.mcap", tmp_path / "out"
+    follower = _follower(live, out)
+    writer = _writer(sim_recording, live, speed=0.2)  # 5 s of camera time per second of it
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (live.exists() and live.stat().st_size > 1e6):
+        time.sleep(0.1)
+    time.sleep(2.0)
+    follower.send_signal(signal.SIGINT)
+    assert follower.wait(timeout=120) == 0
+    writer.kill()
+    writer.wait()
+    frames = json.loads((out / outputs.METRICS).read_text())["odometry"]["frames"]
+    assert 0 < frames < 30
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [outputs.CONFIG, outputs.METRICS, outputs.TRAJECTORY]
+    )
