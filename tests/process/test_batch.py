@@ -336,3 +336,21 @@ def test_a_worker_that_dies_is_a_failed_row(recordings: Path, tmp_path: Path) ->
     assert row["status"] == "failed" and row["name"] == "sim1"
     assert row["reason"] == "worker process died (killed by SIGKILL; out of memory?)"
     assert not task.partial_dir.exists()
+
+
+@pytest.mark.slow
+def test_a_folder_counts_as_complete_only_for_the_same_settings(
+    recordings: Path, tmp_path: Path
+) -> None:
+    def batch(config: str) -> dict[str, Any]:
+        path = tmp_path / "c.toml"
+        path.write_text(config)
+        args = ["batch", str(recordings / "sim1.mcap"), "--out", str(tmp_path / "out")]
+        result = runner.invoke(app, [*args, *ARGS, "--config", str(path)])
+        assert result.exit_code == 0, result.output
+        return _rows(tmp_path / "out")["sim1"]
+
+    assert batch("")["reused"] is False
+    assert batch("[batch]\nmax_retries = 0\n")["reused"] is True  # how to run, not what
+    assert batch("[odometry]\nn_features = 1000\n")["reused"] is False  # another result
+    assert "n_features = 1000" in (tmp_path / "out" / "sim1" / outputs.CONFIG).read_text()
