@@ -57,14 +57,7 @@ class KeyframeFusion:
         self, keyframe: LabelledKeyframe, *, world_from_camera: npt.NDArray[np.float64]
     ) -> None:
         """Fuse a keyframe at its current pose and keep it for a later rebuild."""
-        self.fusion.integrate(
-            keyframe.color,
-            keyframe.depth_m,
-            keyframe.labels,
-            keyframe.confidence,
-            intrinsics=keyframe.intrinsics,
-            world_from_camera=world_from_camera,
-        )
+        self._integrate(keyframe, world_from_camera)
         self._fused_at[keyframe.keyframe_id] = world_from_camera.copy()
         self._intrinsics[keyframe.keyframe_id] = keyframe.intrinsics
         self._store(keyframe)
@@ -76,17 +69,19 @@ class KeyframeFusion:
         ):
             self.fusion = Fusion(self.cfg)
             for kf in sorted(self._fused_at):
-                keyframe = self._load(kf)
-                self.fusion.integrate(
-                    keyframe.color,
-                    keyframe.depth_m,
-                    keyframe.labels,
-                    keyframe.confidence,
-                    intrinsics=keyframe.intrinsics,
-                    world_from_camera=poses[kf],
-                )
+                self._integrate(self._load(kf), poses[kf])
             self.refused = True
         return self.fusion.cloud()
+
+    def _integrate(self, kf: LabelledKeyframe, world_from_camera: npt.NDArray[np.float64]) -> None:
+        self.fusion.integrate(
+            kf.color,
+            kf.depth_m,
+            kf.labels,
+            kf.confidence,
+            intrinsics=kf.intrinsics,
+            world_from_camera=world_from_camera,
+        )
 
     def close(self) -> None:
         """Remove the temporary keyframe files."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -19,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _follower(live: Path, out: Path, *extra: str) -> subprocess.Popen[str]:
     args = [sys.executable, "-m", "process", "run", str(live), "--out", str(out), "--follow"]
-    args += ["--stages", "odometry", "--no-viz", "--follow-idle", "20", *extra]
+    args += ["--stages", "odometry", "--follow-idle", "20", *extra]
     follower = subprocess.Popen(args, cwd=ROOT, stderr=subprocess.PIPE, text=True)
     assert follower.stderr is not None
     deadline = time.monotonic() + 120
@@ -41,7 +42,7 @@ def test_follow_processes_every_frame_as_written_and_ends_with_the_capture(
     sim_recording: Path, tmp_path: Path
 ) -> None:
     live, out = tmp_path / "live.mcap", tmp_path / "out"
-    follower = _follower(live, out)
+    follower = _follower(live, out, "--no-viz")
     writer = _writer(sim_recording, live, speed=0.5)  # 30 frames over 2 s of camera time
     assert writer.wait(timeout=120) == 0
     assert follower.wait(timeout=120) == 0
@@ -57,7 +58,7 @@ def test_ctrl_c_stops_following_and_finishes_with_the_frames_so_far(
     sim_recording: Path, tmp_path: Path
 ) -> None:
     live, out = tmp_path / "live.mcap", tmp_path / "out"
-    follower = _follower(live, out)
+    follower = _follower(live, out, "--no-viz")
     writer = _writer(sim_recording, live, speed=0.2)  # 5 s of camera time per second of it
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not (live.exists() and live.stat().st_size > 1e6):
@@ -72,3 +73,19 @@ def test_ctrl_c_stops_following_and_finishes_with_the_frames_so_far(
     assert sorted(p.name for p in out.iterdir()) == sorted(
         [outputs.CONFIG, outputs.METRICS, outputs.TRAJECTORY]
     )
+
+
+@pytest.mark.slow
+def test_serve_streams_to_viewers_on_a_local_port_while_following(tmp_path: Path) -> None:
+    with socket.socket() as probe:  # a free port on this machine
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    live, out = tmp_path / "live.mcap", tmp_path / "out"
+    args = ["--serve", "--port", str(port)]
+    follower = _follower(live, out, *args, "--follow-idle", "3")
+    with socket.create_connection(("127.0.0.1", port), timeout=10):
+        pass  # a viewer can connect while the capture has not even started
+    assert follower.wait(timeout=120) != 0  # no capture came: one line, nothing half-written
+    assert follower.stderr is not None
+    assert "found no complete frame topics" in follower.stderr.read()
+    assert not out.exists() or outputs.RRD not in [p.name for p in out.iterdir()]

@@ -191,7 +191,7 @@ def test_importing_the_package_does_not_import_torch() -> None:
         "import sys, process.segmentation as s; "
         "s.SegmentationConfig(); print('torch' in sys.modules)"
     )
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, cwd=root, check=True
     )
