@@ -152,13 +152,16 @@ def _run(
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)
-    if live is not None:
-        typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, _interrupt)
-    if follow_idle_s is not None:
-        signal.signal(signal.SIGINT, _stop_following(stop))
-        typer.echo(f"following {recording}: frames are processed as they are written", err=True)
+
+    def started() -> None:  # the log's sinks are open: say so, then take over the signals
+        if live is not None:
+            typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
+        signal.signal(signal.SIGTERM, _interrupt)
+        if follow_idle_s is not None:
+            signal.signal(signal.SIGINT, _stop_following(stop))
+            typer.echo(f"following {recording}: frames are processed as they are written", err=True)
+
     result = run_recording(
         recording,
         out,
@@ -170,6 +173,7 @@ def _run(
         live=live,
         follow_idle_s=follow_idle_s,
         stop=stop,
+        on_start=started,
     )
     console = Console(stderr=False)
     console.print(outputs.summary_table(result.metrics))

@@ -12,6 +12,7 @@ from process.pipeline import ReplayPipeline, RunResult
 
 if TYPE_CHECKING:
     import threading
+    from collections.abc import Callable
 
     from viz.rerun_log import LiveViewer
 
@@ -29,11 +30,13 @@ def run_recording(
     live: LiveViewer | None = None,
     follow_idle_s: float | None = None,
     stop: threading.Event | None = None,
+    on_start: Callable[[], None] | None = None,
 ) -> RunResult:
     """Replay `recording` through `stages` into `out`; every output is written whole or not at all.
 
     `live` also streams the log to a viewer; `follow_idle_s` follows a recording still being
-    written (setting `stop` ends it with the frames so far).
+    written (setting `stop` ends it with the frames so far). `on_start` is called once the
+    log's sinks are open (a viewer can connect), before the first frame is read.
 
     Raises:
         RunInterruptedError: Ctrl-C stopped the run; complete files stay, no partial one.
@@ -61,6 +64,8 @@ def run_recording(
         follow_idle_s=follow_idle_s,
         stop=stop,
     )
+    if on_start is not None:
+        on_start()
     try:
         result = pipeline.run()
     except BaseException as err:
