@@ -156,15 +156,17 @@ def recording_duration_s(recording: Path) -> float:
 
 
 def limit_threads(n: int) -> None:
-    """Limit this process's BLAS, OpenMP, torch and OpenCV thread pools to n threads."""
+    """Limit this process's BLAS, OpenMP, torch, OpenCV and Open3D thread pools to n threads."""
     for var in THREAD_VARS:
         os.environ[var] = str(n)  # libraries loaded from now on
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=n)  # BLAS and OpenMP pools loaded already
     import cv2
+    import open3d as o3d
 
     cv2.setNumThreads(n)
+    o3d.utility.set_max_threads(n)  # its own pool, sized when it loaded
     if "torch" in sys.modules:  # else torch reads OMP_NUM_THREADS when segmentation loads it
         sys.modules["torch"].set_num_threads(n)
 
