@@ -34,7 +34,7 @@ DEMO_REC := $(DEMO_DIR)/sim_seed$(DEMO_SEED).mcap
 demo: $(STAMP)
 	$(BIN)/semreplay-capture simulate $(DEMO_REC) --seed $(DEMO_SEED) --frames $(DEMO_FRAMES)
 	$(BIN)/semreplay-capture info $(DEMO_REC)
-	$(BIN)/semreplay-process run $(DEMO_REC) --out $(DEMO_DIR)/run --config samples/sample.toml
+	$(BIN)/semreplay-process run $(DEMO_REC) --out $(DEMO_DIR)/run --config samples/sample.toml --force
 	@echo
 	@echo "outputs: $(DEMO_DIR)/run (recording.rrd, map_fused.ply, map_refined.ply, trajectory.tum, metrics.json, config.toml)"
 	@echo "open the timeline with: $(BIN)/semreplay-view $(DEMO_DIR)/run/recording.rrd   (or add --web)"

@@ -44,4 +44,8 @@ def main(selected: list[str]) -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["fuzz"]:  # `python -m benchmarks fuzz N`: not a bench_* module
+        from benchmarks.fuzz import main as fuzz_main
+
+        sys.exit(fuzz_main(sys.argv[2:]))
     sys.exit(main(sys.argv[1:]))

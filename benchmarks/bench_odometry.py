@@ -4,13 +4,15 @@ Reference odometry: Open3D's frame-to-frame RGB-D odometry (tensor `rgbd_odometr
 hybrid, its default three-level schedule, full resolution), chained, on the same registered
 depth. Both are timed per frame including the depth registration of the frame (640x480).
 Recordings: a simulated handheld loop (`capture.sim`, seed 3, D435 noise) and the real frames of
-../shared/data (ICL-NUIM living room, slambook2 room; 5 frames each, so mostly a sanity check).
+../shared/data (ICL-NUIM living room, slambook2 room; 5 frames each, so mostly a sanity check;
+TUM fr1_rpy, 694 frames of fast rotation, with ATE, RPE and frames/s: benchmarks.tum_odometry).
 """
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -24,6 +26,7 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from benchmarks.common import Row
+from benchmarks.tum_odometry import tum_rows
 from capture.recording import Intrinsics, RecordingReader, RgbdFrame
 from process.depth import DepthConfig, DepthProcessor, register_depth
 from process.odometry.config import OdometryConfig
@@ -31,6 +34,7 @@ from process.odometry.odometry import Odometry
 from process.trajectory import Trajectory, ate_rmse, path_length
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+TUM_RPY = "tum_fr1_rpy"  # the whole sequence: a Kinect v1 turned fast by hand (README there)
 SIM_SEED = 3
 SIM_FRAMES = 240
 ATE_GOAL = "<= 0.5 % of path, >= 4x better"
@@ -269,6 +273,10 @@ def run() -> list[Row]:
     if DATA.is_dir():
         rows += _odometry_rows(_icl_nuim(), with_fps=False)
         rows += _odometry_rows(_slambook(), with_fps=False)
+    if (DATA / TUM_RPY).is_dir():
+        rows += tum_rows(DATA / TUM_RPY)
+    else:
+        print(f"bench_odometry: no {DATA / TUM_RPY}: TUM fr1_rpy rows skipped", file=sys.stderr)
     if importlib.util.find_spec("pyrealsense2") is not None:
         rows += _registration_rows()
     return rows

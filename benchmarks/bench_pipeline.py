@@ -108,7 +108,7 @@ def _phase_f1(out: Path) -> dict[str, float]:
 
 def _peak_rss_gb(recording: Path, out: Path, *args: str) -> tuple[float, float]:
     """Run the job in a fresh child process; return its peak RSS in GB and its wall time."""
-    child = run_with_peak_rss("process", "run", str(recording), "--out", str(out), *args)
+    child = run_with_peak_rss("process", "run", str(recording), "--out", str(out), "--force", *args)
     return child.peak_gb, child.seconds
 
 
@@ -127,7 +127,7 @@ def ten_minutes(recording: Path | None, out: Path) -> int:
             simulate_recording(recording, seed=7, frames=TEN_MINUTES)
             print(f"simulated {TEN_MINUTES} frames in {time.perf_counter() - t0:.0f} s")
     child = run_with_peak_rss(
-        "process", "run", str(recording), "--out", str(out / "run"), sample_every_s=2.0
+        "process", "run", str(recording), "--out", str(out / "run"), "--force", sample_every_s=2.0
     )
     peak, seconds, samples = child.peak_gb, child.seconds, child.samples
     with (out / "rss.csv").open("w") as f:

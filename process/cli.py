@@ -78,6 +78,9 @@ def run(
     weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
     device: Annotated[str, typer.Option(help="auto | cpu | cuda")] = "auto",
     no_viz: Annotated[bool, typer.Option("--no-viz", help="do not write recording.rrd")] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="replace the outputs of an earlier run in --out")
+    ] = False,
     follow: Annotated[
         bool,
         typer.Option(
@@ -106,7 +109,7 @@ def run(
     if device not in ("auto", "cpu", "cuda"):
         raise typer.BadParameter(f"{device!r}; valid: auto, cpu, cuda", param_hint="--device")
     if not recording.is_file() and not follow:
-        _fail(f"recording not found: {recording}")
+        _fail(f"expected a recording file, found none (or a folder, pipe or device): {recording}")
     if (serve or spawn) and no_viz:
         raise typer.BadParameter(
             "--serve/--spawn stream the log: drop --no-viz", param_hint="--no-viz"
@@ -125,6 +128,7 @@ def run(
             no_viz,
             follow_idle_s=follow_idle if follow else None,
             live=live,
+            force=force,
         )
     except (ReplayError, CaptureError) as err:
         _fail(str(err))
@@ -141,6 +145,7 @@ def _run(
     *,
     follow_idle_s: float | None = None,
     live: LiveViewer | None = None,
+    force: bool = False,
 ) -> None:
     import threading
 
@@ -173,6 +178,7 @@ def _run(
         live=live,
         follow_idle_s=follow_idle_s,
         stop=stop,
+        force=force,
         on_start=started,
     )
     console = Console(stderr=False)
@@ -263,6 +269,9 @@ def refine(
     ground_truth: Annotated[
         Path | None, typer.Option("--ground-truth", help="labelled ground-truth cloud for metrics")
     ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="replace the outputs of an earlier run in --out")
+    ] = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
 ) -> None:
     """Run the refinement alone (planes, SOR, adaptive DBSCAN, regrowth) on a labelled cloud."""
@@ -277,12 +286,13 @@ def refine(
         from process.refine.job import refine_file
 
         cfg = load_config(config)
-        out.mkdir(parents=True, exist_ok=True)
-        outputs.write_text_atomic(out / outputs.CONFIG, to_toml(cfg))
-        metrics = refine_file(cloud, out_dir=out, cfg=cfg.refine, gt_cloud=ground_truth)
-        Console().print(
-            outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
-        )
+        with outputs.staged(out, force=force) as staging:
+            metrics = refine_file(cloud, out_dir=staging, cfg=cfg.refine, gt_cloud=ground_truth)
+            outputs.write_text_atomic(staging / outputs.CONFIG, to_toml(cfg))
+            names = (outputs.MAP_REFINED, outputs.METRICS, outputs.CONFIG)
+            outputs.commit(staging, out, [staging / n for n in names])
+        table = outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
+        Console().print(table)
         typer.echo(f"outputs in {out}: {outputs.MAP_REFINED}, {outputs.METRICS}, {outputs.CONFIG}")
     except ReplayError as err:
         _fail(str(err))

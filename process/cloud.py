@@ -19,6 +19,7 @@ from process.outputs import write_bytes_atomic
 logger = logging.getLogger(__name__)
 
 _GREY: Final = 128  # colour of points whose file has none
+MAX_COORD_M: Final = 1e5  # a room, a building, a campus: never farther than this
 
 
 @dataclass(frozen=True)
@@ -94,15 +95,26 @@ def write_ply(path: Path, cloud: LabelledCloud) -> None:
     write_bytes_atomic(path, ply_bytes(cloud))
 
 
-def read_cloud(path: Path, *, require_labels: bool = True) -> LabelledCloud:
+def read_cloud(path: Path, *, require_labels: bool = True, min_points: int = 0) -> LabelledCloud:
     """Read a labelled cloud from PLY (our own reader) or PCD (through Open3D).
 
     Non-finite points are dropped. Without a `label` field the cloud is refused, or, with
     `require_labels=False`, every point gets label 0.
 
     Raises:
-        CloudError: the file is missing, of another format, malformed, or lacks x y z (or label).
+        CloudError: the file is missing, of another format, malformed, lacks x y z (or label),
+            or has fewer than `min_points` finite points.
     """
+    cloud = _read_cloud(path, require_labels=require_labels)
+    if len(cloud) < min_points:
+        raise CloudError(
+            f"expected at least {min_points} finite point(s), found {len(cloud)}; "
+            f"is the cloud empty?: {path}"
+        )
+    return cloud
+
+
+def _read_cloud(path: Path, *, require_labels: bool) -> LabelledCloud:
     suffix = path.suffix.lower()
     if suffix not in (".ply", ".pcd"):
         raise CloudError(
@@ -139,6 +151,13 @@ def _cloud_from_fields(
     if "cluster" in names:
         clusters = _integer_field(fields, "cluster", source, require=True, high=2**31 - 1)
     keep = np.isfinite(points).all(axis=1)
+    if len(points) and not keep.any():
+        raise CloudError(f"none of the cloud's {len(points)} points is finite (NaN/inf): {source}")
+    if keep.any() and float(np.abs(points[keep]).max()) > MAX_COORD_M:
+        raise CloudError(
+            f"coordinates up to {float(np.abs(points[keep]).max()):.3g} m; expected metres "
+            f"within +-{MAX_COORD_M:g} (another unit, or a corrupt file?): {source}"
+        )
     cloud = LabelledCloud(
         points,
         colors,

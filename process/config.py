@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import stat
 import tomllib
 import types
 import typing
@@ -17,20 +18,41 @@ from process.refine import RefineConfig
 from process.segmentation.config import SegmentationConfig
 
 STAGES: Final = ("odometry", "segmentation", "fusion", "refinement")
+MAX_CONFIG_BYTES: Final = 1 << 20
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
 class VizConfig:
-    """What goes into recording.rrd."""
+    """What goes into recording.rrd: compact by default; full fidelity with compress = false.
 
-    # Colour and depth images of every n-th frame (keyframes always): ~400 KiB per logged frame
-    # with aligned depth, ~1.3 MB when depth is registered here (logged twice), so ~24 GB for a
-    # simulated 10 minutes at 30 fps with n = 1. Poses and tracking: every frame.
+    By default (measured on TUM fr1_rpy, 640x480): colour of every frame as JPEG (~30 KB), depth
+    as lossless PNG (~95 KB) on keyframes and every depth_every_n-th frame (once a second at
+    30 fps), segmentation on keyframes, poses and tracking every frame. Full fidelity
+    (`compress = false`, `depth_every_n = 1`): raw colour and depth of every frame, ~1 MB a frame.
+    """
+
+    # Colour and keypoints of every n-th frame (keyframes always); poses and tracking: every frame.
     images_every_n: int = 1
+    # Depth (raw and registered) of every n-th frame; keyframes' depth always.
+    depth_every_n: int = 30
+    # Colour and confidence as JPEG, depth as lossless PNG; false: raw images.
+    compress: bool = True
+    jpeg_quality: int = 70
 
     def __post_init__(self) -> None:
-        if self.images_every_n < 1:
-            raise ConfigError(f"viz.images_every_n must be >= 1, got {self.images_every_n}")
+        for name in ("images_every_n", "depth_every_n"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"viz.{name} must be >= 1, got {getattr(self, name)}")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise ConfigError(f"viz.jpeg_quality must be in 1..100, got {self.jpeg_quality}")
+
+    def logger_options(self) -> dict[str, Any]:
+        """Return the keyword arguments of viz.rerun_log.RerunLogger for these settings."""
+        return {
+            "compress": self.compress,
+            "jpeg_quality": self.jpeg_quality,
+            "depth_every_n": self.depth_every_n,
+        }
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -79,14 +101,41 @@ def load_config(path: Path | None) -> ReplayConfig:
     """
     if path is None:
         return ReplayConfig()
+    text = _read_config_text(Path(path))
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"config file not found: {path}") from err
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"config is not valid TOML ({err}): {path}") from err
     cfg: ReplayConfig = _build(ReplayConfig, data, where="", path=Path(path))
     return cfg
+
+
+def _read_config_text(path: Path) -> str:
+    """Return a config file's text: a regular file, at most MAX_CONFIG_BYTES, UTF-8 (BOM or not)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError as err:
+        raise ConfigError(f"config file not found: {path}") from err
+    except OSError as err:
+        raise ConfigError(f"cannot read the config ({err.strerror}): {path}") from err
+    if not stat.S_ISREG(mode):
+        raise ConfigError(f"expected a TOML config file, found a folder, pipe or device: {path}")
+    try:
+        with path.open("rb") as f:
+            raw = f.read(MAX_CONFIG_BYTES + 1)
+    except OSError as err:
+        raise ConfigError(f"cannot read the config ({err.strerror}): {path}") from err
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(
+            f"config is larger than {MAX_CONFIG_BYTES // 1024} KiB; expected a small TOML file: "
+            f"{path}"
+        )
+    try:
+        return raw.decode("utf-8-sig")  # a BOM (Windows editors) is accepted
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"config is not UTF-8 text (byte {err.start}); save it as UTF-8 TOML: {path}"
+        ) from err
 
 
 def _build(cls: type[Any], data: dict[str, Any], *, where: str, path: Path) -> Any:

@@ -202,7 +202,7 @@ def register_depth(
             if z_buffer == "mean":
                 targets.append(target)
                 values.append(z_out[pick])
-    if z_buffer == "mean":
+    if z_buffer == "mean" and targets:  # none when no depth pixel lands in the image
         out = _mean_of_nearest(out, np.concatenate(targets), np.concatenate(values))
     out[np.isinf(out)] = 0.0
     return out.reshape(h_c, w_c)

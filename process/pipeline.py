@@ -10,6 +10,7 @@ final poses from the keyframes the fusion kept on disk (process.fusion.keyframes
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 import threading
@@ -33,6 +34,7 @@ from process.depth import DepthProcessor
 from process.evaluate import class_counts, confusion_matrix, ratios
 from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
 from process.odometry.odometry import Odometry, TrackResult
+from process.preview import write_preview
 from process.streaming import Worker
 from process.trajectory import Trajectory, ate_rmse, path_length, rpe, write_tum
 from viz.background import BackgroundLogger
@@ -114,6 +116,8 @@ class ReplayPipeline:
             with reader as rec:
                 self._note_ground_truth(rec)
                 ground_truth = self._replay(rec)
+                for text in rec.warnings:  # already in the log
+                    self._warn(text, logged=True)
                 gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
             trajectory = self._finish_odometry(ground_truth)
             self._keyframes.join()
@@ -135,7 +139,8 @@ class ReplayPipeline:
 
     def _stop_threads(self, *, failed: bool) -> None:
         """Stop the keyframe and logging threads; after a failure, keep the first error."""
-        for stop in (self._keyframes.join, self.viz.close):
+        close_viz = functools.partial(outputs.close_logger, self.viz, quiet=False)  # OutputError
+        for stop in (self._keyframes.join, close_viz):
             try:
                 stop()
             except Exception:
@@ -205,9 +210,9 @@ class ReplayPipeline:
     ) -> None:
         images = track.is_keyframe or frame.index % self.cfg.viz.images_every_n == 0
         if images:
-            self.viz.log_frame(frame)
+            self.viz.log_frame(frame, keyframe=track.is_keyframe)
             if not frame.aligned:
-                self.viz.log_registered_depth(depth_m)
+                self.viz.log_registered_depth(depth_m, keyframe=track.is_keyframe)
         self.viz.log_pose(track.world_from_camera, keyframe=track.is_keyframe)
         if images:  # keypoints only over the image they belong to
             self.viz.log_keypoints(track.state.keypoints_xy, inliers=track.state.inlier_mask)
@@ -303,8 +308,7 @@ class ReplayPipeline:
                 f" {self.cfg.fusion.min_depth_m:g}..{self.cfg.fusion.max_depth_m:g} m;"
                 " refinement is skipped (check [fusion] and the recording's depth)"
             )
-            self.viz.log_text(note, level="WARN")
-            logger.warning(note)
+            self._warn(note)
             return
         self._refine(cloud, gt_cloud, up=up)
 
@@ -312,6 +316,13 @@ class ReplayPipeline:
         path = self.out_dir / name
         write_ply(path, cloud)
         self.result.written.append(path)
+        # the picture of the last map written: the refined one replaces the fused one's
+        up = None if self._odometry is None else -self._odometry.world_from_first[:3, 1]
+        picture = write_preview(
+            self.out_dir / outputs.PREVIEW, cloud.points, cloud.labels, up_hint=up
+        )
+        self.result.written += [] if picture in self.result.written else [picture]
+        self.result.metrics["preview"] = picture.name
 
     def _refine(
         self, cloud: LabelledCloud, gt_cloud_ply: bytes | None, *, up: npt.NDArray[np.float64]
@@ -369,6 +380,13 @@ class ReplayPipeline:
         seconds = self.clock.wall.get("odometry", 0.0) + self.clock.wall.get("depth", 0.0)
         if odo is not None:
             odo["fps"] = round(n / seconds, 2) if seconds > 0 else None
+
+    def _warn(self, text: str, *, logged: bool = False) -> None:
+        """Say a warning in the .rrd and metrics.json "warnings" (and the log unless it was)."""
+        self.viz.log_text(text, level="WARN")
+        if not logged:
+            logger.warning("%s", text)
+        self.result.metrics.setdefault("warnings", []).append(text)
 
     def _write_config(self) -> None:
         path = self.out_dir / outputs.CONFIG

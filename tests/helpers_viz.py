@@ -59,8 +59,10 @@ class RrdContents:
         return np.concatenate(parts) if parts else np.empty(0)
 
 
-def read_rrd(path: Path) -> RrdContents:
-    """Read the first recording store of an .rrd."""
+def read_rrd(path: Path, *, verify: bool = True) -> RrdContents:
+    """Read the first recording store of an .rrd, after `rerun rrd verify` passed on it."""
+    if verify:
+        assert_rrd_verifies(path)
     reader = RrdReader(path)
     (store,) = reader.recordings()
     contents = RrdContents(application_id=store.application_id, blueprints=len(reader.blueprints()))
@@ -87,3 +89,9 @@ def rerun_verify(path: Path) -> subprocess.CompletedProcess[str]:
         check=False,
         env=env,
     )
+
+
+def assert_rrd_verifies(path: Path) -> None:
+    """Fail the test unless `rerun rrd verify` passes on the file."""
+    result = rerun_verify(path)
+    assert result.returncode == 0, f"rerun rrd verify {path}: {result.stderr.strip()[-500:]}"

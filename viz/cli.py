@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import signal
 import socket
 import subprocess
 import sys
 import tempfile
+import threading
 from collections.abc import Mapping
 from pathlib import Path
+from types import FrameType
 from typing import Annotated, Final
 from urllib.parse import quote
 
@@ -18,6 +21,8 @@ import typer
 LOCALHOST: Final = "127.0.0.1"
 DEFAULT_WEB_PORT: Final = 9090  # rerun's --web-viewer-port default
 DEFAULT_GRPC_PORT: Final = 9876  # rerun's --port default
+STOP_SIGNALS: Final = (signal.SIGTERM, signal.SIGHUP)  # SIGINT arrives as KeyboardInterrupt
+STOP_GRACE_S: Final = 5.0  # how long the viewer has to exit on SIGTERM before it is killed
 
 EXAMPLES: Final = (
     "Examples:\n\n"
@@ -102,13 +107,51 @@ def viewer_command(
     return cmd
 
 
-def run_viewer(cmd: list[str]) -> int:
-    """Run the viewer in the foreground and return its exit status (130 on Ctrl-C)."""
-    env = {**os.environ, "RERUN_APP_ONLY": "true"}  # as rerun's own spawn(): no first-run banner
+class _StopSignalError(Exception):
+    """Raised in the main thread when a stop signal (SIGTERM, SIGHUP) arrives."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_stopped(signum: int, _frame: FrameType | None) -> None:
+    raise _StopSignalError(signum)
+
+
+def _stop(child: subprocess.Popen[bytes]) -> None:
+    """Terminate the viewer, killing it if it has not exited after STOP_GRACE_S."""
+    child.terminate()
     try:
-        return subprocess.call(cmd, env=env)
+        child.wait(timeout=STOP_GRACE_S)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.wait()
+
+
+def run_viewer(cmd: list[str]) -> int:
+    """Run the viewer in the foreground and return its exit status.
+
+    On SIGINT (Ctrl-C), SIGTERM or SIGHUP the viewer is stopped before this returns 128 plus
+    the signal's number, so that no `rerun` process outlives us and the caller's temporary
+    folder can be removed.
+    """
+    env = {**os.environ, "RERUN_APP_ONLY": "true"}  # as rerun's own spawn(): no first-run banner
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = {s: signal.signal(s, _raise_stopped) for s in STOP_SIGNALS} if in_main else {}
+    child: subprocess.Popen[bytes] | None = None
+    try:
+        child = subprocess.Popen(cmd, env=env)
+        return child.wait()
     except KeyboardInterrupt:
-        return 130
+        return 128 + signal.SIGINT
+    except _StopSignalError as stopped:
+        return 128 + stopped.signum
+    finally:
+        if child is not None and child.poll() is None:
+            _stop(child)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def _prepare(file: Path, *, web: bool, port: int, grpc_port: int) -> str:

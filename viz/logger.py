@@ -50,12 +50,12 @@ class Logger(Protocol):
         """Log the colour camera's pinhole, once, static."""
         return None
 
-    def log_frame(self, frame: RgbdFrame) -> None:
-        """Log a frame's colour (JPEG) and raw depth."""
+    def log_frame(self, frame: RgbdFrame, *, keyframe: bool = False) -> None:
+        """Log a frame's colour and, at the depth rate or on keyframes, its raw depth."""
         return None
 
-    def log_registered_depth(self, depth_m: FloatArray) -> None:
-        """Log depth registered to the colour camera, in metres."""
+    def log_registered_depth(self, depth_m: FloatArray, *, keyframe: bool = False) -> None:
+        """Log depth registered to the colour camera, in metres (at the depth rate)."""
         return None
 
     def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Final
+from typing import Final, Literal
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 import rerun as rr
@@ -15,10 +16,47 @@ from viz.logger import FloatArray, IntArray
 _MM_PER_M: Final = 1000.0
 
 
-def depth_image(depth_m: FloatArray) -> rr.DepthImage:
-    """Return a depth image in whole millimetres (half the bytes of float32 in the .rrd)."""
+# PNG level 1 with run-length matching: on 15 TUM fr1_rpy depth frames ~95 KB in ~10 ms each,
+# smaller and faster than the default strategy at level 1 (110 KB, 14 ms) or 3 (99 KB, 20 ms);
+# rerun's own DepthImage.compress (PIL) gave ~106 KB at level 1. Measured under load.
+_PNG_PARAMS: Final = [
+    cv2.IMWRITE_PNG_COMPRESSION,
+    1,
+    cv2.IMWRITE_PNG_STRATEGY,
+    cv2.IMWRITE_PNG_STRATEGY_RLE,
+]
+
+
+def millimetres(depth_m: FloatArray) -> npt.NDArray[np.uint16]:
+    """Return depth in whole millimetres (0 = none), clipped to uint16."""
     mm: npt.NDArray[np.uint16] = np.clip(depth_m * _MM_PER_M + 0.5, 0.0, 65535.0).astype(np.uint16)
-    return rr.DepthImage(mm, meter=_MM_PER_M)
+    return mm
+
+
+def depth_image(depth_m: FloatArray) -> rr.DepthImage:
+    """Return a raw depth image in whole millimetres (half the bytes of float32 in the .rrd)."""
+    return rr.DepthImage(millimetres(depth_m), meter=_MM_PER_M)
+
+
+def depth_png(depth_m: FloatArray) -> rr.EncodedDepthImage:
+    """Return depth in whole millimetres as a lossless 16-bit PNG."""
+    ok, png = cv2.imencode(".png", millimetres(depth_m), _PNG_PARAMS)
+    if not ok:
+        raise ValueError(f"could not encode a depth image of shape {np.shape(depth_m)} as PNG")
+    return rr.EncodedDepthImage(blob=png.tobytes(), media_type="image/png", meter=_MM_PER_M)
+
+
+def image(
+    pixels: npt.NDArray[np.uint8], model: Literal["RGB", "L"], *, jpeg_quality: int | None
+) -> rr.Image | rr.EncodedImage:
+    """Return an image as JPEG at jpeg_quality, or raw for None."""
+    raw = rr.Image(pixels, color_model=model)
+    return raw if jpeg_quality is None else raw.compress(jpeg_quality=jpeg_quality)
+
+
+def depth(depth_m: FloatArray, *, png: bool) -> rr.DepthImage | rr.EncodedDepthImage:
+    """Return depth in millimetres as a lossless PNG, or raw."""
+    return depth_png(depth_m) if png else depth_image(depth_m)
 
 
 def points(points: FloatArray, name: str) -> npt.NDArray[np.float32]:

@@ -53,12 +53,31 @@ class RerunLogger(NullLogger):
         *,
         application_id: str = layout.APPLICATION_ID,
         recording_name: str,
-        jpeg_quality: int = 90,
+        compress: bool = True,
+        jpeg_quality: int = 70,
+        depth_every_n: int = 30,
         live: LiveViewer | None = None,
     ) -> None:
+        """Open rrd_path for writing.
+
+        Args:
+            rrd_path: the .rrd to write.
+            application_id: the application id the viewer matches blueprints by.
+            recording_name: the name the viewer shows.
+            compress: colour and confidence as JPEG, depth as lossless PNG; False logs raw
+                images (full fidelity, ~1 MB a frame).
+            jpeg_quality: the JPEG quality, 1..100.
+            depth_every_n: depth (raw and registered) of every n-th frame; keyframes always.
+            live: also stream to a viewer (spawned, or a local gRPC server), if given.
+        """
         if not 1 <= jpeg_quality <= 100:
             raise ValueError(f"expected jpeg_quality in 1..100, found {jpeg_quality}")
-        self._jpeg_quality = jpeg_quality
+        if depth_every_n < 1:
+            raise ValueError(f"expected depth_every_n >= 1, found {depth_every_n}")
+        self._compress = compress
+        self._jpeg = jpeg_quality if compress else None  # None: raw colour
+        self._depth_every_n = depth_every_n
+        self._frame = 0
         self._rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         self._rec.set_log_time_enabled(False)  # only our timelines: wall-clock time means nothing
         sinks: list[rr.FileSink | rr.GrpcSink | rr.GrpcServerSink] = [rr.FileSink(rrd_path)]
@@ -83,6 +102,7 @@ class RerunLogger(NullLogger):
     def set_frame(self, index: int, *, stamp_ns: int) -> None:
         """Set the `frame` and `capture_time` timelines for what follows."""
         self._rec.set_time(layout.TIMELINE_FRAME, sequence=index)
+        self._frame = index
         self._rec.set_time(layout.TIMELINE_CAPTURE_TIME, timestamp=np.datetime64(stamp_ns, "ns"))
         self._frame_of_stamp[stamp_ns] = index
 
@@ -108,17 +128,24 @@ class RerunLogger(NullLogger):
         self._rec.log(layout.CAMERA, pinhole, static=True)
         self._calibrated = True
 
-    def log_frame(self, frame: RgbdFrame) -> None:
-        """Log a frame's colour (JPEG) and raw depth; the pinhole too if not logged yet."""
+    def log_frame(self, frame: RgbdFrame, *, keyframe: bool = False) -> None:
+        """Log a frame's colour and, on keyframes and every depth_every_n-th frame, its depth.
+
+        The pinhole is logged too if it was not yet.
+        """
         if not self._calibrated:
             self.log_calibration(frame.color_intrinsics)
-        rgb = rr.Image(frame.color, color_model="RGB").compress(jpeg_quality=self._jpeg_quality)
-        self._rec.log(layout.RGB, rgb)
-        self._rec.log(layout.DEPTH, rerun_arrays.depth_image(frame.depth_m))
+        self._rec.log(layout.RGB, rerun_arrays.image(frame.color, "RGB", jpeg_quality=self._jpeg))
+        if self._depth_due(keyframe):
+            self._rec.log(layout.DEPTH, rerun_arrays.depth(frame.depth_m, png=self._compress))
 
-    def log_registered_depth(self, depth_m: FloatArray) -> None:
-        """Log depth registered to the colour camera, in metres (drawn as a cloud in 3-D)."""
-        self._rec.log(layout.DEPTH_REGISTERED, rerun_arrays.depth_image(depth_m))
+    def log_registered_depth(self, depth_m: FloatArray, *, keyframe: bool = False) -> None:
+        """Log depth registered to the colour camera, in metres (drawn as a cloud in 3-D).
+
+        Logged on keyframes and every depth_every_n-th frame, as the raw depth.
+        """
+        if self._depth_due(keyframe):
+            self._rec.log(layout.DEPTH_REGISTERED, rerun_arrays.depth(depth_m, png=self._compress))
 
     def log_pose(self, world_from_camera: FloatArray, *, keyframe: bool) -> None:
         """Log the camera pose of the current frame and mark keyframes on the trail."""
@@ -187,7 +214,7 @@ class RerunLogger(NullLogger):
         self._rec.log(layout.SEGMENTATION, rr.SegmentationImage(ids, opacity=0.5))
         if confidence is not None:
             grey = np.clip(np.asarray(confidence) * 255.0 + 0.5, 0.0, 255.0).astype(np.uint8)
-            self._rec.log(layout.CONFIDENCE, rr.Image(grey, color_model="L"))
+            self._rec.log(layout.CONFIDENCE, rerun_arrays.image(grey, "L", jpeg_quality=self._jpeg))
 
     def log_timing(self, stage: str, seconds: float) -> None:
         """Log the time a stage took, in seconds."""
@@ -271,6 +298,10 @@ class RerunLogger(NullLogger):
         self._closed = True
         self._rec.flush()
         self._rec.disconnect()
+
+    def _depth_due(self, keyframe: bool) -> bool:
+        """Return whether the current frame's depth is logged: keyframes and every n-th frame."""
+        return keyframe or self._frame % self._depth_every_n == 0
 
     def _style(self, path: str, style: rr.AsComponents) -> None:
         """Log a static style (series name, colour) for an entity once."""

@@ -9,10 +9,16 @@ recording ends by itself: the stream reader stops after the footer.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import IO, Final
+from typing import IO, Any, Final, cast
+
+from mcap.stream_reader import StreamReader
+
+logger = logging.getLogger(__name__)
 
 _POLL_S: Final = 0.02
 
@@ -64,3 +70,16 @@ class GrowingFile:
                 return False
             time.sleep(_POLL_S)
         return False
+
+
+def follow_records(stream: GrowingFile, path: Path) -> Iterator[Any]:
+    """Yield the records of a file being written as they arrive.
+
+    The stream ends at the footer, when the writer stays idle, or at a record that cannot be
+    read (a damaged or half-written chunk: what came before it is kept).
+    """
+    stream.seek(0)
+    try:
+        yield from StreamReader(cast(IO[bytes], stream)).records
+    except Exception as err:  # the idle end (a short read) or a damaged chunk: no common base
+        logger.debug("followed recording ends (%s): %s", err, path)

@@ -1,28 +1,22 @@
-"""The index of a recording: its topics, metadata and times, from the summary or from a scan.
+"""The index of a recording: its topics, metadata, times and damage, from a tolerant walk.
 
-A file that was never finished (a killed writer) has no summary; it is then read as a stream of
-records, up to the last complete one.
+A finished file, one that was never finished (a killed writer) and a damaged one are all read
+the same way (`salvage.McapSalvage`): every intact chunk counts, the damaged ones are counted.
 """
 
 from __future__ import annotations
 
 import logging
-import struct
-from collections.abc import Iterator
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
-
-from mcap.exceptions import McapError
-from mcap.reader import SeekingReader
-from mcap.records import Attachment, Channel, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 
 from capture.errors import RecordingError
+from capture.recording.salvage import MAGIC, Damage, McapSalvage
 
 logger = logging.getLogger(__name__)
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+MCAP_MAGIC = MAGIC
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,83 +30,102 @@ class TopicInfo:
 
 @dataclass(slots=True)
 class McapIndex:
-    """What a recording holds, from its summary or, for an unfinished file, from a scan."""
+    """What a recording holds (intact data only) and what of it was lost."""
 
     finished: bool = False
     topics: dict[str, TopicInfo] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    attachments: dict[str, bytes | None] = field(default_factory=dict)  # None: read on demand
+    attachments: list[str] = field(default_factory=list)
     start_ns: int = 0
     end_ns: int = 0
-
-    def add_topic(self, channel: Channel, schema: Schema | None, count: int) -> None:
-        """Count a channel's messages under its topic."""
-        old = self.topics.get(channel.topic)
-        total = count + (old.count if old else 0)
-        self.topics[channel.topic] = TopicInfo(channel.topic, schema.name if schema else "", total)
+    damage: Damage = field(default_factory=Damage)
+    lost: dict[str, int] = field(default_factory=dict)  # messages lost per topic, where known
+    duplicates: int = 0  # repeated messages (duplicated chunks or records), dropped
+    damage_chunks_at_open: int = 0  # damaged chunks found by the walk (more may be found later)
 
 
-def stream_records(stream: IO[bytes]) -> Iterator[Any]:
-    """Yield every complete record; a truncated tail (killed writer) ends the stream."""
-    stream.seek(0)
+def check_regular_file(path: Path) -> None:
+    """Raise RecordingError unless path is a regular file (not missing, a folder, a FIFO...)."""
     try:
-        yield from StreamReader(stream).records
-    except (McapError, struct.error, EOFError, ValueError):
-        return
-    except Exception as err:  # zstd/lz4 errors on a half-written chunk have no common base
-        logger.debug("recording ends in an incomplete record: %s", err)
+        mode = path.stat().st_mode
+    except OSError as err:
+        raise RecordingError(f"cannot open recording: {err.strerror}: {path}") from err
+    if not stat.S_ISREG(mode):
+        raise RecordingError(
+            f"expected a recording file (.mcap), found a folder, pipe or device: {path}"
+        )
 
 
-def _read_summary(stream: IO[bytes]) -> McapIndex | None:
+def open_index(path: Path, *, verify: bool = True) -> tuple[McapIndex, McapSalvage]:
+    """Walk the recording at path; return its index and the walker that reads its messages.
+
+    verify=False trusts an intact summary (see `McapSalvage.scan`): damaged chunks are then
+    found, skipped and counted while the messages are read.
+
+    Raises:
+        RecordingError: not a regular file, not MCAP, or nothing in it is readable.
+    """
+    check_regular_file(path)
     try:
-        reader = SeekingReader(stream)
-        summary = reader.get_summary()
-        if summary is None or summary.statistics is None:
-            return None
-        index = McapIndex(finished=True)
-        counts = summary.statistics.channel_message_counts
-        for cid, channel in summary.channels.items():
-            index.add_topic(channel, summary.schemas.get(channel.schema_id), counts.get(cid, 0))
-        index.start_ns = summary.statistics.message_start_time
-        index.end_ns = summary.statistics.message_end_time
-        for meta in reader.iter_metadata():
-            index.metadata.setdefault(meta.name, {}).update(meta.metadata)
-        index.attachments = dict.fromkeys(a.name for a in summary.attachment_indexes)
-    except (McapError, struct.error, ValueError, OSError, EOFError):
-        return None
-    return index
-
-
-def _scan(stream: IO[bytes]) -> McapIndex:
-    index = McapIndex(finished=False)
-    counts: dict[int, int] = {}
-    channels: dict[int, Channel] = {}
-    schemas: dict[int, Schema] = {}
-    times: list[int] = []
-    for record in stream_records(stream):
-        if isinstance(record, Schema):
-            schemas[record.id] = record
-        elif isinstance(record, Channel):
-            channels[record.id] = record
-        elif isinstance(record, Message):
-            counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
-            times.append(record.log_time)
-        elif isinstance(record, Metadata):
-            index.metadata.setdefault(record.name, {}).update(record.metadata)
-        elif isinstance(record, Attachment):
-            index.attachments[record.name] = record.data
-    for cid, channel in channels.items():
-        index.add_topic(channel, schemas.get(channel.schema_id), counts.get(cid, 0))
-    if times:
-        index.start_ns, index.end_ns = min(times), max(times)
-    return index
-
-
-def read_index(stream: IO[bytes], path: Path) -> McapIndex:
-    """Return the index of an open MCAP stream, scanning it when it was never finished."""
-    if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+        salvage = McapSalvage(path)
+    except (OSError, ValueError) as err:
+        reason = getattr(err, "strerror", None) or str(err)
+        raise RecordingError(f"cannot open recording: {reason}: {path}") from err
+    if not salvage.has_magic:
+        salvage.close()
         raise RecordingError(
             f"not an MCAP file (bad magic bytes); expected a .mcap recording: {path}"
         )
-    stream.seek(0)
-    return _read_summary(stream) or _scan(stream)
+    salvage.scan(verify=verify)
+    if not (salvage.channels or salvage.metadata or salvage.finished):
+        salvage.close()
+        found = "; ".join(salvage.damage.reasons[:2]) or "no record after the magic bytes"
+        raise RecordingError(
+            f"nothing in this MCAP file is readable ({found}); it is damaged beyond recovery,"
+            f" re-record or restore it: {path}"
+        )
+    return _index_of(salvage), salvage
+
+
+def _index_of(salvage: McapSalvage) -> McapIndex:
+    index = McapIndex(
+        finished=salvage.finished,
+        metadata=salvage.metadata,
+        attachments=list(salvage.attachments),
+        start_ns=salvage.start_ns,
+        end_ns=salvage.end_ns,
+        damage=salvage.damage,
+        duplicates=salvage.duplicates,
+        damage_chunks_at_open=salvage.damage.chunks_lost,
+    )
+    for cid, channel in sorted(salvage.channels.items()):
+        schema = salvage.schemas.get(channel.schema_id)
+        old = index.topics.get(channel.topic)
+        count = salvage.counts.get(cid, 0) + (old.count if old else 0)
+        datatype = schema.name if schema else (old.datatype if old else "")
+        index.topics[channel.topic] = TopicInfo(channel.topic, datatype, count)
+        lost = salvage.damage.lost_by_channel.get(cid, 0)
+        if lost:
+            index.lost[channel.topic] = index.lost.get(channel.topic, 0) + lost
+    return index
+
+
+def damage_note(index: McapIndex, path: Path) -> str:
+    """Return one line on what was lost ("" when nothing was)."""
+    d = index.damage
+    if not d.any and not index.duplicates:
+        return ""
+    parts = []
+    if d.chunks_lost:
+        parts.append(f"{d.chunks_lost} damaged chunk(s) skipped")
+    if d.records_skipped:
+        parts.append(f"{d.records_skipped} unreadable record(s) skipped")
+    if d.bytes_skipped:
+        parts.append(f"{d.bytes_skipped} unreadable byte(s) skipped")
+    if index.lost:
+        parts.append(
+            "messages lost: " + ", ".join(f"{t} {n}" for t, n in sorted(index.lost.items()))
+        )
+    if index.duplicates:
+        parts.append(f"{index.duplicates} duplicated message(s) dropped")
+    return f"recording is damaged: {'; '.join(parts)}: {path}"

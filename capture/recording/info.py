@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from capture.errors import RecordingError
-from capture.recording.index import TopicInfo, read_index
+from capture.recording.index import TopicInfo, damage_note
 from capture.recording.reader import RecordingReader
 
 
@@ -25,6 +25,7 @@ class RecordingInfo:
     device: dict[str, str] = field(default_factory=dict)
     capture: dict[str, str] = field(default_factory=dict)
     attachments: list[str] = field(default_factory=list)
+    damage: str = ""  # what was lost, one line ("" when intact)
 
     @property
     def drops(self) -> dict[str, int] | None:
@@ -37,21 +38,33 @@ class RecordingInfo:
 
 
 def describe(path: Path) -> RecordingInfo:
-    """Return the summary of a recording (finished or recovered, RGB-D or not)."""
+    """Return the summary of a recording (finished, recovered or damaged; RGB-D or not).
+
+    The frame count: for an intact finished recording, its colour frames; for an unfinished or
+    damaged one, the frames that `process run` replays (they are decoded here, so that both
+    commands give the same number).
+    """
     path = Path(path)
-    try:
-        with path.open("rb") as stream:
-            index = read_index(stream, path)
-    except OSError as err:
-        raise RecordingError(f"cannot open recording: {err.strerror}: {path}") from err
+    rec = RecordingReader(path, verify=True)  # every chunk checked: exact counts
     frames: int | None = None
     aligned: bool | None = None
     reason = ""
     try:
-        with RecordingReader(path) as rec:
-            frames, aligned = len(rec), rec.aligned
+        rec.open()
     except RecordingError as err:
+        if rec.index is None:
+            raise  # not a file, not MCAP, nothing readable: nothing to describe
         reason = str(err)
+    else:
+        with rec:
+            aligned = rec.aligned
+            try:
+                frames = _count_frames(rec)
+            except RecordingError as err:
+                reason = str(err)
+    index = rec.index
+    if index is None:  # open() read it or raised above
+        raise RecordingError(f"recording could not be read: {path}")
     return RecordingInfo(
         path=path,
         finished=index.finished,
@@ -63,7 +76,16 @@ def describe(path: Path) -> RecordingInfo:
         device=index.metadata.get("device", {}),
         capture=index.metadata.get("capture", {}),
         attachments=list(index.attachments),
+        damage=damage_note(index, path),
     )
+
+
+def _count_frames(rec: RecordingReader) -> int:
+    """Return the frames a run replays (a replay when the file is damaged or unfinished)."""
+    index = rec.index
+    if index is not None and index.finished and not index.damage.any and not index.duplicates:
+        return len(rec)
+    return sum(1 for _ in rec.frames())
 
 
 def format_info(info: RecordingInfo) -> str:
@@ -84,6 +106,7 @@ def format_info(info: RecordingInfo) -> str:
         if drops is not None
         else "unknown (no end-of-capture record)"
     )
+    damage = info.damage.rsplit(": ", 1)[0].removeprefix("recording is damaged: ")
     device = " ".join(f"{k}={v}" for k, v in info.device.items() if v) or "unknown"
     lines = [
         f"recording  {info.path}",
@@ -91,6 +114,7 @@ def format_info(info: RecordingInfo) -> str:
         f"frames     {frames}",
         f"duration   {info.duration_s:.3f} s",
         f"dropped    {dropped}",
+        f"damage     {damage or 'none'}",
         f"device     {device}",
         f"attached   {', '.join(info.attachments) or 'nothing'}",
         "topics",

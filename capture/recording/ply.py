@@ -58,6 +58,10 @@ def decode(data: bytes, *, source: str) -> npt.NDArray[np.void]:
     fmt, elements = _header(lines, source)
     offset = body
     for name, count, fields in elements:
+        if not fields:
+            raise RecordingError(
+                f"PLY element {name!r} has no properties; expected x y z ...: {source}"
+            )
         dtype = np.dtype([(f, (fmt if fmt != "ascii" else "<") + t) for f, t in fields])
         if name == "vertex":
             if fmt == "ascii":
@@ -88,6 +92,11 @@ def _header(lines: list[str], source: str) -> tuple[str, _Elements]:
         elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property" and elements and len(words) == 3 and words[1] in _TO_NUMPY:
+            if any(name == words[2] for name, _ in elements[-1][2]):
+                raise RecordingError(
+                    f"PLY element {elements[-1][0]!r} declares property {words[2]!r} twice; "
+                    f"expected each once: {source}"
+                )
             elements[-1][2].append((words[2], _TO_NUMPY[words[1]]))
         else:
             raise RecordingError(

@@ -9,17 +9,17 @@ from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any, cast
+from typing import Any
 
-from mcap.reader import SeekingReader
 from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
 from capture.errors import RecordingError
 from capture.recording import messages as m
-from capture.recording.follow import GrowingFile
+from capture.recording.follow import GrowingFile, follow_records
 from capture.recording.frames import RgbdFrame
-from capture.recording.index import McapIndex, TopicInfo, read_index, stream_records
+from capture.recording.index import McapIndex, TopicInfo, damage_note, open_index
+from capture.recording.salvage import DECODE_ERRORS, McapSalvage
 from capture.recording.sync import (
     FrameSync,
     Topics,
@@ -29,14 +29,15 @@ from capture.recording.sync import (
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RecordingReader", "TopicInfo", "intrinsics_from_msg", "pose_from_msg", "read_index"]
+__all__ = ["RecordingReader", "TopicInfo", "intrinsics_from_msg", "pose_from_msg"]
 
 
 class RecordingReader:
     """Read a recording as a stream of synchronised `RgbdFrame` values.
 
     Usage: `with RecordingReader(path) as rec: for frame in rec.frames(): ...`.
-    Recordings that were never finished (a killed writer) replay every complete chunk. With
+    Recordings that were never finished (a killed writer) or are damaged replay every intact
+    chunk; what was lost or skipped is said once in the log and kept in `warnings`. With
     `follow_idle_s`, a recording still being written is followed: frames are yielded as the
     writer's chunks arrive, until the writer finishes the file, stays idle for that many
     seconds, or `stop` is set.
@@ -48,19 +49,25 @@ class RecordingReader:
         *,
         sync_tolerance_ns: int = 20_000_000,
         prefer_aligned: bool = True,
+        verify: bool = False,
         follow_idle_s: float | None = None,
         stop: threading.Event | None = None,
     ) -> None:
+        """Prepare to read path; verify=True checks every chunk at open() (exact counts)."""
         self.path = Path(path)
-        self.sync_tolerance_ns = sync_tolerance_ns
-        self.prefer_aligned = prefer_aligned
+        self.verify = verify
         self.follow_idle_s = follow_idle_s
         self.stop = stop or threading.Event()
+        self.sync_tolerance_ns = sync_tolerance_ns
+        self.prefer_aligned = prefer_aligned
         self.unpaired_color_frames = 0
+        self.warnings: list[str] = []  # what the last open() and frames() distrusted or skipped
         self._index = McapIndex()
-        self._stream: IO[bytes] | None = None
-        self._growing: GrowingFile | None = None  # the same stream, when following
+        self._index_read = False
+        self._salvage: McapSalvage | None = None
+        self._growing: GrowingFile | None = None  # the file, when following it
         self._decoders = DecoderFactory()
+        self._undecodable = 0
 
     # -- opening ---------------------------------------------------------------------------
     def __enter__(self) -> RecordingReader:
@@ -77,15 +84,16 @@ class RecordingReader:
 
     def open(self) -> None:
         """Open the file, read its summary (or scan it if unfinished) and find its topics."""
+        self.warnings = []
         if self.follow_idle_s is not None:
             self._open_following(self.follow_idle_s)
             return
+        self._index, self._salvage = open_index(self.path, verify=self.verify)
+        self._index_read = True
+        note = damage_note(self._index, self.path)
+        if note:
+            self._warn(note)
         try:
-            self._stream = self.path.open("rb")
-        except OSError as err:
-            raise RecordingError(f"cannot open recording: {err.strerror}: {self.path}") from err
-        try:
-            self._index = read_index(self._stream, self.path)
             self._topics = self._discover()
         except RecordingError:
             self.close()
@@ -97,11 +105,12 @@ class RecordingReader:
         deadline = time.monotonic() + idle_s
         while time.monotonic() < deadline and not self.stop.is_set():
             try:
-                with self.path.open("rb") as stream:
-                    self._index = read_index(stream, self.path)
+                self._index, self._salvage = open_index(self.path, verify=False)
+                self._index_read = True
                 self._topics = self._discover()
                 break
             except (RecordingError, OSError) as err:
+                self.close()
                 last = err if isinstance(err, RecordingError) else RecordingError(str(err))
                 time.sleep(0.1)
         else:
@@ -111,15 +120,21 @@ class RecordingReader:
             )
         if not self.finished:
             self._growing = GrowingFile(self.path, idle_s=idle_s, stop=self.stop)
-            self._stream = cast(IO[bytes], self._growing)  # read, seek and tell are all it needs
-        else:
-            self._stream = self.path.open("rb")
 
     def close(self) -> None:
         """Close the file."""
-        if self._stream is not None:
-            self._stream.close()
-            self._stream = None
+        if self._salvage is not None:
+            self._salvage.close()
+            self._salvage = None
+        if self._growing is not None:
+            self._growing.close()
+            self._growing = None
+
+    def _warn(self, text: str) -> None:
+        if text in self.warnings:  # a second pass over the frames says nothing new
+            return
+        logger.warning("%s", text)
+        self.warnings.append(text)
 
     def _discover(self) -> Topics:
         found = ", ".join(f"{t.name} ({t.datatype})" for t in self.topics.values()) or "none"
@@ -176,6 +191,14 @@ class RecordingReader:
         return self._growing is not None
 
     @property
+    def index(self) -> McapIndex | None:
+        """Return what the walk of the file found, or None before open() read it.
+
+        open() sets it even when it then refuses the recording (not RGB-D).
+        """
+        return self._index if self._index_read else None
+
+    @property
     def finished(self) -> bool:
         """Return whether the file was finished (has a summary) rather than recovered."""
         return self._index.finished
@@ -228,54 +251,89 @@ class RecordingReader:
     def depth_scale_m(self) -> float:
         """Return metres per depth unit: the `device` record's depth_scale_m, else 1 mm."""
         text = self.metadata.get("device", {}).get("depth_scale_m")
-        return float(text) if text else 0.001
+        if not text:
+            return 0.001
+        try:
+            scale = float(text)
+        except ValueError:
+            scale = float("nan")
+        if not 1e-6 <= scale <= 1.0:  # also NaN
+            self._warn(
+                f"device depth_scale_m {text!r} is not metres per unit in [1e-6, 1]; using "
+                f"0.001 (1 mm, the D435's): {self.path}"
+            )
+            return 0.001
+        return scale
 
     @property
     def duration_ns(self) -> int:
         """Return the time between the first and the last message."""
         return self.end_ns - self.start_ns
 
+    @property
+    def lost_frames(self) -> int:
+        """Return the colour frames the damaged parts of the file held, where it says."""
+        return self._index.lost.get(self._topics.color, 0)
+
     def attachment(self, name: str) -> bytes | None:
-        """Return the data of the named attachment, or None when the recording has none."""
-        data = self._index.attachments.get(name)
-        if data is not None or name not in self._index.attachments or self._stream is None:
-            return data
-        self._stream.seek(0)
-        for att in SeekingReader(self._stream).iter_attachments():
-            if att.name == name:
-                return att.data
-        return None
+        """Return the data of the named attachment, or None when absent or unreadable."""
+        if self.following:  # written at the end of the capture: look at the file as it is now
+            _, salvage = open_index(self.path, verify=False)
+            try:
+                return salvage.attachment(name)
+            finally:
+                salvage.close()
+        return None if self._salvage is None else self._salvage.attachment(name)
 
     # -- frames ----------------------------------------------------------------------------
     def _messages(self, topics: list[str]) -> Iterator[tuple[str, Any, int]]:
-        """Yield (topic, decoded message, log_ns) in log-time order (file order if unfinished)."""
-        if self._stream is None:
+        """Yield (topic, decoded message, log_ns) in log-time order; skip undecodable ones."""
+        if self._salvage is None:
             raise RecordingError(
                 f"recording is not open; use `with RecordingReader(path)`: {self.path}"
             )
-        if self.finished:
-            self._stream.seek(0)
-            reader = SeekingReader(self._stream, decoder_factories=[self._decoders])
-            for _, channel, message, decoded in reader.iter_decoded_messages(
-                topics=topics, log_time_order=True
-            ):
-                yield channel.topic, decoded, message.log_time
+        self._undecodable = 0
+        if self._growing is not None:
+            yield from self._followed_messages(set(topics), self._growing)
             return
-        wanted = set(topics)
+        salvage = self._salvage
+        ids = {cid for cid, c in salvage.channels.items() if c.topic in set(topics)}
+        for record in salvage.messages(ids):
+            channel = salvage.channels[record.channel_id]
+            decoded = self._decode(channel, salvage.schemas.get(channel.schema_id), record.data)
+            if decoded is not None:
+                yield channel.topic, decoded, record.log_time
+
+    def _followed_messages(
+        self, wanted: set[str], growing: GrowingFile
+    ) -> Iterator[tuple[str, Any, int]]:
+        """Yield the messages of a file being written, in file order, as they arrive."""
         schemas: dict[int, Schema] = {}
         channels: dict[int, Channel] = {}
-        for record in stream_records(self._stream):
+        for record in follow_records(growing, self.path):
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel):
                 channels[record.id] = record
-            elif isinstance(record, Message) and channels[record.channel_id].topic in wanted:
-                channel = channels[record.channel_id]
-                decoder = self._decoders.decoder_for(
-                    channel.message_encoding, schemas.get(channel.schema_id)
-                )
-                if decoder is not None:
-                    yield channel.topic, decoder(record.data), record.log_time
+            elif isinstance(record, Message):
+                channel = channels.get(record.channel_id)
+                if channel is None or channel.topic not in wanted:
+                    continue
+                decoded = self._decode(channel, schemas.get(channel.schema_id), record.data)
+                if decoded is not None:
+                    yield channel.topic, decoded, record.log_time
+
+    def _decode(self, channel: Channel, schema: Schema | None, data: bytes) -> Any:
+        """Return a decoded message, or None (counted) when its schema or bytes are corrupt."""
+        try:
+            decoder = self._decoders.decoder_for(channel.message_encoding, schema)
+            if decoder is None:
+                raise RecordingError(f"no ROS 2 schema for '{channel.topic}'")
+            return decoder(data)
+        except DECODE_ERRORS as err:
+            self._undecodable += 1
+            logger.debug("undecodable message on %s: %s", channel.topic, err)
+            return None
 
     def frames(
         self, *, start_ns: int | None = None, end_ns: int | None = None
@@ -295,22 +353,33 @@ class RecordingReader:
                 yield replace(frame, index=emitted)
                 emitted += 1
         self.unpaired_color_frames = sync.unpaired
+        self._report(sync, emitted)
+
+    def _report(self, sync: FrameSync, emitted: int) -> None:
+        """Say what was skipped; raise when nothing at all could be replayed."""
+        lost = self._salvage.damage.chunks_lost if self._salvage else 0
+        if lost > self._index.damage_chunks_at_open:
+            new = lost - self._index.damage_chunks_at_open
+            self._warn(f"{new} damaged chunk(s) skipped while replaying: {self.path}")
+        if self._undecodable:
+            self._warn(f"{self._undecodable} undecodable message(s) skipped: {self.path}")
+        for text in sync.notes():
+            self._warn(f"{text}: {self.path}")
         if sync.unpaired:
-            logger.warning(
-                "%d colour frames had no depth within %.0f ms and were skipped: %s",
-                sync.unpaired,
-                self.sync_tolerance_ns / 1e6,
-                self.path,
+            self._warn(
+                f"{sync.unpaired} colour frame(s) had no depth within "
+                f"{self.sync_tolerance_ns / 1e6:.0f} ms and were skipped: {self.path}"
             )
         if self.following:  # the writer may have finished: read what the file says now
-            with self.path.open("rb") as stream:
-                self._index = read_index(stream, self.path)
+            self._index, salvage = open_index(self.path, verify=False)
+            salvage.close()
         if not self.finished:
-            logger.warning(
-                "recording was not finished (writer killed?); recovered %d frames: %s",
-                emitted,
-                self.path,
+            self._warn(
+                f"recording was not finished (writer killed?); recovered {emitted} frames: "
+                f"{self.path}"
             )
+        if sync.emitted == 0:
+            raise RecordingError(sync.why_none(self.path))
 
     def _synced(self, sync: FrameSync, topics: list[str]) -> Iterator[RgbdFrame]:
         for topic, msg, log_ns in self._messages(topics):

@@ -16,7 +16,9 @@ from scipy.spatial.transform import Rotation
 
 from capture.errors import RecordingError
 from capture.recording import messages as m
+from capture.recording.checks import extrinsics_problem, intrinsics_problem
 from capture.recording.frames import Extrinsics, GroundTruth, Intrinsics, RgbdFrame
+from capture.recording.salvage import DECODE_ERRORS
 
 COLOR_ENCODINGS: Final = {
     "rgb8": (3, False),
@@ -63,11 +65,23 @@ def intrinsics_from_msg(msg: Any) -> Intrinsics:
 
 
 def pose_from_msg(msg: Any) -> npt.NDArray[np.float64]:
-    """Return the 4x4 matrix of a decoded geometry_msgs/PoseStamped."""
+    """Return the 4x4 matrix of a decoded geometry_msgs/PoseStamped.
+
+    Raises:
+        RecordingError: the position is not finite or the quaternion is not a rotation.
+    """
     p, q = msg.pose.position, msg.pose.orientation
+    quat = np.array([q.x, q.y, q.z, q.w], np.float64)
+    xyz = np.array([p.x, p.y, p.z], np.float64)
+    norm = float(np.linalg.norm(quat))
+    if not (np.isfinite(quat).all() and np.isfinite(xyz).all() and abs(norm - 1.0) < 0.1):
+        raise RecordingError(
+            f"invalid pose: quaternion {quat.tolist()} (norm {norm:.3g}, expected 1), "
+            f"position {xyz.tolist()}"
+        )
     out = np.eye(4)
-    out[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-    out[:3, 3] = [p.x, p.y, p.z]
+    out[:3, :3] = Rotation.from_quat(quat).as_matrix()
+    out[:3, 3] = xyz
     return out
 
 
@@ -142,7 +156,12 @@ def json_dict(text: str) -> dict[str, str]:
 
 
 class FrameSync:
-    """Pair colour with the nearest depth by stamp, holding a short window of messages."""
+    """Pair colour with the nearest depth by stamp, holding a short window of messages.
+
+    A message or frame that cannot be used (undecodable, impossible calibration, a stamp that
+    repeats or goes back) is skipped and counted, never fatal; `notes()` says what was skipped
+    and `why_none()` why no frame came out at all.
+    """
 
     WINDOW_NS: Final = 300_000_000  # everything of one frame arrives within this much log time
 
@@ -161,47 +180,130 @@ class FrameSync:
         self.gt: dict[str, dict[int, Any]] = {key: {} for key in topics.ground_truth}
         self.metadata: dict[int, dict[str, str]] = {}
         self.unpaired = 0
+        self.emitted = 0
+        self.colors = 0
+        self.depth_count = 0
+        self.last_color_ns: int | None = None
+        self.skipped: dict[str, int] = {}  # what was skipped -> how many
+        self.reasons: dict[str, str] = {}  # what was skipped -> the first reason
+        self.no_depth = 0  # frames replayed although their depth has no valid pixel
+
+    def _skip(self, what: str, reason: str) -> None:
+        self.skipped[what] = self.skipped.get(what, 0) + 1
+        self.reasons.setdefault(what, reason)
 
     def push(self, topic: str, msg: Any, log_ns: int) -> Iterator[RgbdFrame]:
         """Take one decoded message; yield the frames that can no longer gain a partner."""
+        try:
+            self._take(topic, msg, log_ns)
+        except DECODE_ERRORS as err:  # a damaged message: skip it, say so at the end
+            self._skip(f"unusable '{topic}' message(s)", _reason(err))
+        while self.pending and log_ns - self.pending[0].log_ns > self.WINDOW_NS:
+            frame = self._emit_or_skip(self.pending.popleft())
+            if frame is not None:
+                yield frame
+
+    def _take(self, topic: str, msg: Any, log_ns: int) -> None:
         t = self.t
         if topic == t.color:
-            color = decode_color(topic, msg, self.path)
-            self.pending.append(_Pending(m.stamp_ns_of(msg.header.stamp), log_ns, color))
+            self._color(msg, log_ns)
         elif topic == t.depth:
             depth = decode_depth(topic, msg, self.path, scale_m=self.depth_scale_m)
             self.depths.append((m.stamp_ns_of(msg.header.stamp), depth))
-        elif topic == t.color_info:
-            self.color_info = intrinsics_from_msg(msg)
-        elif topic == t.depth_info:
-            self.depth_info = intrinsics_from_msg(msg)
+            self.depth_count += 1
+        elif topic in (t.color_info, t.depth_info):
+            k = intrinsics_from_msg(msg)
+            problem = intrinsics_problem(k)
+            if problem:
+                self._skip(f"invalid camera_info on '{topic}'", problem)
+            elif topic == t.color_info:
+                self.color_info = k
+            else:
+                self.depth_info = k
         elif topic == t.extrinsics:
-            self.extrinsics = Extrinsics.from_librealsense(msg.rotation, msg.translation)
+            e = Extrinsics.from_librealsense(msg.rotation, msg.translation)
+            problem = extrinsics_problem(e)
+            if problem:
+                self._skip(f"invalid extrinsics on '{topic}'", problem)
+            else:
+                self.extrinsics = e
         elif topic == t.color_metadata:
             self.metadata[m.stamp_ns_of(msg.header.stamp)] = json_dict(msg.json_data)
         else:
             for key, gt_topic in t.ground_truth.items():
                 if topic == gt_topic:
                     self.gt[key][m.stamp_ns_of(msg.header.stamp)] = msg
-        while self.pending and log_ns - self.pending[0].log_ns > self.WINDOW_NS:
-            frame = self._emit(self.pending.popleft())
-            if frame is not None:
-                yield frame
+
+    def _color(self, msg: Any, log_ns: int) -> None:
+        self.colors += 1
+        stamp = m.stamp_ns_of(msg.header.stamp)
+        if self.last_color_ns is not None and stamp <= self.last_color_ns:
+            self._skip(
+                "colour frame(s) with a stamp not after the previous one (repeated or going back)",
+                f"{stamp} ns after {self.last_color_ns} ns",
+            )
+            return
+        color = decode_color(self.t.color, msg, self.path)
+        self.last_color_ns = stamp
+        self.pending.append(_Pending(stamp, log_ns, color))
 
     def drain(self) -> Iterator[RgbdFrame]:
         """Yield the frames still waiting at the end of the recording."""
         while self.pending:
-            frame = self._emit(self.pending.popleft())
+            frame = self._emit_or_skip(self.pending.popleft())
             if frame is not None:
                 yield frame
+
+    def notes(self) -> list[str]:
+        """Return one line per kind of skipped message or frame."""
+        notes = [f"{n} {what} skipped ({self.reasons[what]})" for what, n in self.skipped.items()]
+        if self.no_depth:
+            notes.append(
+                f"{self.no_depth} of {self.emitted} frame(s) have no valid depth pixel (all zero, "
+                "NaN or inf): they add nothing to the map"
+            )
+        return notes
+
+    def why_none(self, path: Path) -> str:
+        """Return the one-line error for a recording that gave no frame at all."""
+        if self.colors == 0:
+            return f"no readable colour frame on '{self.t.color}'; is the recording empty?: {path}"
+        if self.skipped:
+            # A bad calibration is the cause of the unusable frames: name it first.
+            what, n = min(
+                self.skipped.items(),
+                key=lambda kv: (
+                    not kv[0].startswith(("invalid camera_info", "invalid extr")),
+                    -kv[1],
+                ),
+            )
+            return (
+                f"no frame could be replayed: {n} {what} ({self.reasons[what]}); "
+                f"fix or re-record the recording: {path}"
+            )
+        if self.unpaired:
+            return (
+                f"no colour frame had a depth frame within {self.tolerance_ns / 1e6:.0f} ms "
+                f"({self.colors} colour, {self.depth_count} depth messages); are colour and depth "
+                f"stamped on the same clock?: {path}"
+            )
+        return f"no frame could be replayed from {self.colors} colour messages: {path}"
+
+    def _emit_or_skip(self, p: _Pending) -> RgbdFrame | None:
+        try:
+            frame = self._emit(p)
+        except DECODE_ERRORS as err:
+            self._skip("unusable frame(s)", _reason(err))
+            return None
+        if frame is not None:
+            self.emitted += 1
+            self.no_depth += not bool((frame.depth_m > 0).any())
+        return frame
 
     def _emit(self, p: _Pending) -> RgbdFrame | None:
         t = self.t
         if self.color_info is None:
-            raise RecordingError(
-                f"colour frame at {p.stamp_ns} ns has no camera_info on '{t.color_info}': "
-                f"{self.path}"
-            )
+            raise RecordingError(f"no valid camera_info on '{t.color_info}' before it")
         best = min(self.depths, key=lambda d: abs(d[0] - p.stamp_ns), default=None)
         if best is None or abs(best[0] - p.stamp_ns) > self.tolerance_ns:
             self.unpaired += 1
@@ -210,7 +312,7 @@ class FrameSync:
         check_size(t.color, p.color.shape[:2], self.color_info, self.path)
         check_size(t.depth, best[1].shape, depth_info, self.path)
         if not t.aligned and self.extrinsics is None:
-            raise RecordingError(f"no '{t.extrinsics}' message before the first frame: {self.path}")
+            raise RecordingError(f"no valid '{t.extrinsics}' message before it")
         return RgbdFrame(
             index=0,
             stamp_ns=p.stamp_ns,
@@ -240,11 +342,33 @@ class FrameSync:
                 del table[old]
         gt_topics = self.t.ground_truth
         return GroundTruth(
-            world_from_camera=None if pose is None else pose_from_msg(pose),
+            world_from_camera=None if pose is None else self._pose(pose),
             labels=None
             if labels is None
-            else image_array(gt_topics["labels"], labels, np.dtype(np.uint8), 1, self.path),
+            else self._gt_image(gt_topics["labels"], labels, np.dtype(np.uint8)),
             instances=None
             if instances is None
-            else image_array(gt_topics["instances"], instances, np.dtype("<u2"), 1, self.path),
+            else self._gt_image(gt_topics["instances"], instances, np.dtype("<u2")),
         )
+
+    def _pose(self, msg: Any) -> npt.NDArray[np.float64] | None:
+        try:
+            return pose_from_msg(msg)
+        except DECODE_ERRORS as err:
+            self._skip("invalid ground-truth pose(s)", _reason(err))
+            return None
+
+    def _gt_image(self, topic: str, msg: Any, dtype: np.dtype[Any]) -> npt.NDArray[Any] | None:
+        try:
+            img = image_array(topic, msg, dtype, 1, self.path)
+            check_size(topic, img.shape, self.color_info or Intrinsics(0, 0, 0, 0, 0, 0), self.path)
+        except DECODE_ERRORS as err:
+            self._skip(f"invalid ground-truth image(s) on '{topic}'", _reason(err))
+            return None
+        return img
+
+
+def _reason(err: BaseException) -> str:
+    text = str(err).splitlines()[0] if str(err) else type(err).__name__
+    text = text.rsplit(": /", 1)[0]  # the path is said once, at the end of the line
+    return text[:160]

@@ -12,7 +12,7 @@ from process import outputs
 
 CSV: Final = "summary.csv"
 PARQUET: Final = "summary.parquet"
-PREVIEW: Final = "preview.png"  # written by `process run` where it makes one
+PREVIEW: Final = outputs.PREVIEW  # a top view of the map, where `process run` made one
 MARKER: Final = "batch.json"  # a folder's row, written last: the folder is complete
 STAGES: Final = ("read", "depth", "odometry", "segmentation", "fusion", "refinement", "logging")
 PHASES: Final = ("I", "II", "III")

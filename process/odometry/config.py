@@ -31,6 +31,7 @@ _RANGES: Final[dict[str, tuple[float, float]]] = {
     "dense_min_fitness": (0.0, 1.0),
     "dense_max_correction_m": (0.0001, 10.0),
     "dense_max_correction_deg": (0.01, 90.0),
+    "dense_max_reprojection_px": (0.0, 100.0),
     "relocalise_keyframes": (0, 50),
     "lost_frames_new_segment": (1, 100_000),
     "loop_min_gap": (2, 100_000),
@@ -76,6 +77,7 @@ class OdometryConfig:
     dense_min_fitness: float = 0.3
     dense_max_correction_m: float = 0.05  # larger corrections of the PnP pose are rejected
     dense_max_correction_deg: float = 3.0
+    dense_max_reprojection_px: float = 0.5  # ... and those that worsen the PnP inliers' RMS more
     relocalise_keyframes: int = 5  # recent keyframes tried when tracking fails
     lost_frames_new_segment: int = 15  # lost this long: start a new segment
     loop_closure: bool = True

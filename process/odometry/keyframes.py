@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -39,6 +40,23 @@ def needs_keyframe(
     return share < cfg.keyframe_min_overlap
 
 
+@dataclass(frozen=True, slots=True)
+class FeatureCheck:
+    """The PnP inliers behind a pose: a dense correction must keep explaining them."""
+
+    points: npt.NDArray[np.float32]  # (N, 3) keyframe frame
+    normalised: npt.NDArray[np.float32]  # (N, 2) their keypoints in the current image, x/z y/z
+    focal_px: float
+
+    def rms_px(self, kf_from_camera: npt.NDArray[np.float64]) -> float:
+        """Return the RMS reprojection error of the inliers at a pose."""
+        camera_from_kf = rigid_inverse(kf_from_camera)
+        q = self.points @ camera_from_kf[:3, :3].T + camera_from_kf[:3, 3]
+        z = np.maximum(q[:, 2], 1e-6)
+        err = q[:, :2] / z[:, None] - self.normalised
+        return self.focal_px * float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+
+
 def refine_densely(
     dense: DenseAligner,
     source: Any,
@@ -47,12 +65,22 @@ def refine_densely(
     *,
     cfg: OdometryConfig,
     quick: bool = False,
+    check: FeatureCheck | None = None,
 ) -> npt.NDArray[np.float64]:
-    """Return the densely refined relative pose, or the given one where refinement fails."""
+    """Return the densely refined relative pose, or the given one where refinement fails.
+
+    With a check, a correction that makes the PnP inliers reproject worse by more than
+    cfg.dense_max_reprojection_px (RMS) is refused: on blurred or rolling-shutter images
+    (Kinect v1 under fast rotation) the photometric term pulls away from the features.
+    """
     result = dense.align(source, target, init_target_from_source=kf_from_camera, quick=quick)
     if result is None or result.fitness < cfg.dense_min_fitness:
         return kf_from_camera
     moved_m, turned_deg = pose_difference(kf_from_camera, result.target_from_source)
     if moved_m > cfg.dense_max_correction_m or turned_deg > cfg.dense_max_correction_deg:
         return kf_from_camera
+    if check is not None and len(check.points) > 0:
+        worse = check.rms_px(result.target_from_source) - check.rms_px(kf_from_camera)
+        if worse > cfg.dense_max_reprojection_px:
+            return kf_from_camera
     return result.target_from_source

@@ -8,10 +8,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from process.geometry import rigid_inverse
 from process.odometry.features import Keyframe
 from process.odometry.matching import match
 from process.odometry.pnp import PnpSolver, information_from_points
 from process.odometry.pose_graph import Edge, PoseGraph
+from process.odometry.pose_refine import refine_with_depth
 
 if TYPE_CHECKING:
     from process.odometry.config import OdometryConfig
@@ -67,8 +69,20 @@ def find_loop(
         result = pnp.solve(old.points[t], current.xy[q], min_inliers=min_inliers)
         if result is None or (best is not None and len(result.inliers) <= best[1]):
             continue
-        support = information_from_points(old.points[t[result.inliers]])
-        old_from_current = result.reference_from_camera
+        inliers_q, inliers_t = q[result.inliers], t[result.inliers]
+        support = information_from_points(old.points[inliers_t])
+        # As for odometry edges: the current keyframe's own depth at the inliers refines the pose.
+        k = pnp.camera_matrix
+        xy = current.xy[inliers_q].astype(np.float64)
+        normalised = np.stack([(xy[:, 0] - k[0, 2]) / k[0, 0], (xy[:, 1] - k[1, 2]) / k[1, 1]], 1)
+        camera_from_old, _ = refine_with_depth(
+            old.points[inliers_t],
+            normalised.astype(np.float32),
+            current.points[inliers_q, 2],
+            camera_from_reference=result.camera_from_reference,
+            focal_px=float(k[0, 0]),
+        )
+        old_from_current = rigid_inverse(camera_from_old)
         best = Edge(current.id, old.id, old_from_current, support, True), len(result.inliers)
     return best
 

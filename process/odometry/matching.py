@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 from capture.recording import Intrinsics
 from process.geometry import project, transform_points
 
-_GUIDED_NEIGHBOURS = 32  # nearest current keypoints compared with each projected reference
+_GUIDED_NEIGHBOURS = 16  # nearest current keypoints compared with each projected reference
 _MAX_HAMMING = 64  # of 256 bits: ORB descriptors further apart are not the same point
 
 

@@ -20,7 +20,7 @@ keyframe keeps images.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -33,6 +33,7 @@ from process.odometry.features import FeatureExtractor, Keyframe
 from process.odometry.pose_graph import PoseGraph
 from process.odometry.state import TrackState
 from process.odometry.tracker import Tracker
+from process.odometry.undistort import Undistorter
 from process.trajectory import Trajectory
 
 
@@ -68,8 +69,10 @@ class Odometry:
         self.cfg = cfg
         self.intrinsics = intrinsics
         self.world_from_first = np.eye(4) if world_from_first is None else world_from_first
+        self._undistort = Undistorter(intrinsics) if intrinsics.is_distorted else None
+        pinhole = self._undistort.pinhole if self._undistort else intrinsics
         extractor = FeatureExtractor(
-            intrinsics,
+            pinhole,
             n_features=cfg.n_features,
             scale_factor=cfg.orb_scale_factor,
             levels=cfg.orb_levels,
@@ -78,7 +81,7 @@ class Odometry:
             max_depth_m=cfg.max_depth_m,
         )
         dense = DenseAligner(
-            intrinsics,
+            pinhole,
             scale=cfg.dense_scale,
             max_depth_m=cfg.max_depth_m,
             iterations=cfg.dense_iterations,
@@ -110,8 +113,17 @@ class Odometry:
     def track(self, frame: RgbdFrame, depth_m: npt.NDArray[np.float32]) -> TrackResult:
         """Estimate the pose of one frame from its colour and its depth in the colour camera."""
         gray = np.asarray(cv2.cvtColor(frame.color, cv2.COLOR_RGB2GRAY), np.uint8)
-        state = self._tracker.step(gray, np.asarray(depth_m, np.float32), frame)
+        depth = np.asarray(depth_m, np.float32)
+        if self._undistort is not None:
+            gray, depth = self._undistort.gray(gray), self._undistort.depth(depth)
+        state = self._tracker.step(gray, depth, frame)
         self._frames.append((frame.stamp_ns, state.keyframe_id, state.keyframe_from_camera))
+        if self._undistort is not None:  # the timeline draws on the raw image
+            state = replace(
+                state,
+                keypoints_xy=self._undistort.to_distorted(state.keypoints_xy),
+                matched_keyframe_xy=self._undistort.to_distorted(state.matched_keyframe_xy),
+            )
         return TrackResult(
             frame.index,
             frame.stamp_ns,

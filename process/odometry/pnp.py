@@ -12,6 +12,7 @@ from process.geometry import rigid_inverse
 
 _PRIOR_GATE = 4.0  # matches within this many RANSAC thresholds of the prior seed its hypothesis
 _PRIOR_SHARE = 0.8  # the prior's hypothesis wins with at least this share of RANSAC's inliers
+_PRIOR_ENOUGH = 0.5  # ... and RANSAC is not even tried when it explains this share of the matches
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,22 +58,32 @@ class PnpSolver:
             return None
         obj = np.ascontiguousarray(points, np.float64)
         img = np.ascontiguousarray(xy, np.float64)
+        predicted = self._from_prior(obj, img, prior, min_inliers) if prior is not None else None
+        if predicted is not None and len(predicted.inliers) >= _PRIOR_ENOUGH * len(obj):
+            return predicted  # the camera moved as predicted: no need for RANSAC
         seed = self._ransac(obj, img, min_inliers)
         found = self._refine(obj, img, seed, min_inliers) if seed is not None else None
-        if prior is None:
-            return found
-        rvec = np.asarray(cv2.Rodrigues(prior[:3, :3])[0], np.float64)
-        tvec = prior[:3, 3].reshape(3, 1).copy()
-        err = _reprojection_errors(obj, img, rvec, tvec, self.camera_matrix, self.dist)
-        gated = np.flatnonzero(err < _PRIOR_GATE * self.reprojection_px).astype(np.int64)
-        if len(gated) < min_inliers:
-            return found
-        predicted = self._refine(obj, img, (rvec, tvec, gated), min_inliers)
         if predicted is None:
             return found
         if found is None or len(predicted.inliers) >= _PRIOR_SHARE * len(found.inliers):
             return predicted
         return found
+
+    def _from_prior(
+        self,
+        obj: npt.NDArray[np.float64],
+        img: npt.NDArray[np.float64],
+        prior: npt.NDArray[np.float64],
+        min_inliers: int,
+    ) -> PnpResult | None:
+        """Return the pose grown from the matches the prior already explains, or None."""
+        rvec = np.asarray(cv2.Rodrigues(prior[:3, :3])[0], np.float64)
+        tvec = prior[:3, 3].reshape(3, 1).copy()
+        err = _reprojection_errors(obj, img, rvec, tvec, self.camera_matrix, self.dist)
+        gated = np.flatnonzero(err < _PRIOR_GATE * self.reprojection_px).astype(np.int64)
+        if len(gated) < min_inliers:
+            return None
+        return self._refine(obj, img, (rvec, tvec, gated), min_inliers)
 
     def _ransac(
         self, obj: npt.NDArray[np.float64], img: npt.NDArray[np.float64], min_inliers: int

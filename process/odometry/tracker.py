@@ -12,7 +12,7 @@ from capture.recording import RgbdFrame
 from process.geometry import rigid_inverse
 from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
-from process.odometry.keyframes import needs_keyframe, refine_densely
+from process.odometry.keyframes import FeatureCheck, needs_keyframe, refine_densely
 from process.odometry.locate import Located, Locator
 from process.odometry.loop_closure import LoopCloser
 from process.odometry.pnp import information_from_points
@@ -25,6 +25,9 @@ if TYPE_CHECKING:
 __all__ = ["TrackState", "Tracker"]
 
 _WEAK_INFORMATION = 1e-3  # ties a new segment to the old one without constraining it
+_DENSE_REFUSALS = 5
+_PREDICT_THROUGH_LOST = 5  # lost frames over which the last motion is still extrapolated
+_DENSE_PAUSE_FRAMES = 30
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +66,8 @@ class Tracker:
         self._lost = 0
         self._failure = ""
         self._segment = 0
+        self._dense_refused = 0  # dense corrections of frames refused in a row
+        self._dense_pause = 0  # frames left without dense refinement
         self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=self.graph)
 
     def step(
@@ -105,10 +110,14 @@ class Tracker:
         return found
 
     def _predict(self, kf: Keyframe) -> npt.NDArray[np.float64] | None:
-        """Return camera_from_keyframe if the camera keeps its last motion, or None when lost."""
-        if self._lost:
+        """Return camera_from_keyframe if the camera keeps its last motion, or None.
+
+        Through a short loss (a blurred or blank frame) the last motion is carried on over the
+        lost frames; after a longer one there is no prediction.
+        """
+        if self._lost > _PREDICT_THROUGH_LOST:
             return None
-        world = self._last_world @ self._velocity
+        world = self._last_world @ np.linalg.matrix_power(self._velocity, self._lost + 1)
         return rigid_inverse(world) @ self.graph.poses[kf.id]
 
     def _relocalise(self, image: _Image) -> Located | None:
@@ -133,6 +142,7 @@ class Tracker:
         kf, n_inliers = found.keyframe, len(found.pnp.inliers)
         kf_from_camera = found.pnp.reference_from_camera
         status, events = "ok", []
+        gap, previous = self._lost, self._ref
         if self._lost or kf is not self._ref:
             status = "relocalised"
             after = f" after {self._lost} lost frame(s)" if self._lost else ""
@@ -150,12 +160,15 @@ class Tracker:
                 kf_from_camera, corrected = np.eye(4), bool(made)
                 events.append(made)
         elif self.cfg.dense_refine_all_frames and kf.dense is not None:
-            kf_from_camera = self._refine_frame(kf, kf_from_camera, image)
+            kf_from_camera = self._refine_frame(found, kf_from_camera, image)
         ref = self._ref
         assert ref is not None  # set above
         self._kf_from_camera = kf_from_camera
         world = self.graph.poses[ref.id] @ kf_from_camera
-        self._velocity = np.eye(4) if status != "ok" else rigid_inverse(self._last_world) @ world
+        if status == "ok":
+            self._velocity = rigid_inverse(self._last_world) @ world
+        elif gap > _PREDICT_THROUGH_LOST or kf is not previous:
+            self._velocity = np.eye(4)  # relocalised elsewhere: the last motion means nothing
         self._last_world = world
         event = "; ".join(e for e in events if e) or None
         return TrackState(
@@ -170,13 +183,38 @@ class Tracker:
         )
 
     def _refine_frame(
-        self, kf: Keyframe, kf_from_camera: npt.NDArray[np.float64], image: _Image
+        self, found: Located, kf_from_camera: npt.NDArray[np.float64], image: _Image
     ) -> npt.NDArray[np.float64]:
-        """Return a non-keyframe's pose against kf, refined densely with the short schedule."""
+        """Return a non-keyframe's pose against kf, refined densely with the short schedule.
+
+        After _DENSE_REFUSALS refused corrections in a row, the next _DENSE_PAUSE_FRAMES frames
+        keep their feature pose without trying.
+        """
+        if self._dense_pause > 0:
+            self._dense_pause -= 1
+            return kf_from_camera
         current = self.dense.prepare(image.gray, image.depth)
-        return refine_densely(
-            self.dense, current, kf.dense, kf_from_camera, cfg=self.cfg, quick=True
+        refined = refine_densely(
+            self.dense,
+            current,
+            found.keyframe.dense,
+            kf_from_camera,
+            cfg=self.cfg,
+            quick=True,
+            check=self._check(found, image),
         )
+        # Refused again and again (blur, rolling shutter): stop paying for it a while.
+        self._dense_refused = self._dense_refused + 1 if refined is kf_from_camera else 0
+        if self._dense_refused >= _DENSE_REFUSALS:
+            self._dense_refused, self._dense_pause = 0, _DENSE_PAUSE_FRAMES
+        return refined
+
+    def _check(self, found: Located, image: _Image) -> FeatureCheck:
+        """Return the PnP inliers of a located image, for checking dense corrections."""
+        inliers = found.pnp.inliers
+        normalised = self.extractor.normalised(image.xy[found.query[inliers]])
+        points = found.keyframe.points[found.train[inliers]]
+        return FeatureCheck(points, normalised, self.extractor.intrinsics.fx)
 
     # -- keyframes -----------------------------------------------------------------------------
     def _new_keyframe(
@@ -216,9 +254,14 @@ class Tracker:
         """Make the image a keyframe; return None if it cannot be, else the loop event or ""."""
         parent = found.keyframe
         dense = self.dense.prepare(image.gray, image.depth) if self.cfg.dense_refine else None
-        if dense is not None and parent.dense is not None:
+        if dense is not None and parent.dense is not None and self._dense_pause == 0:
             kf_from_camera = refine_densely(
-                self.dense, dense, parent.dense, kf_from_camera, cfg=self.cfg
+                self.dense,
+                dense,
+                parent.dense,
+                kf_from_camera,
+                cfg=self.cfg,
+                check=self._check(found, image),
             )
         kf = self._new_keyframe(
             image, world_from_keyframe=self.graph.poses[parent.id] @ kf_from_camera

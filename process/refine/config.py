@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from process.errors import ConfigError
+from process.refine.selection import RULES
 
 
 @dataclass(frozen=True)
@@ -17,28 +18,37 @@ class RefineConfig:
     """
 
     plane_distance_m: float = 0.02  # D: RANSAC inlier distance
-    plane_min_points: int = 10_000  # Min: a plane with fewer inliers ends the search
+    plane_min_points: int = 0  # Min: a plane with fewer inliers ends the search; 0 = relative:
+    plane_min_area_m2: float = 1.0  # ... this much surface at the cloud's density,
+    plane_min_share: float = 0.02  # ... or this share of the points, whichever is smaller
     plane_max_remaining: int = 1000  # Max: the search ends once fewer points remain
     plane_iterations: int = 300  # RANSAC iterations per plane (Table 5: 300)
     plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
     max_planes: int = 8  # planes tried at most, structural or not
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
-    wall_min_height_m: float = 1.5  # an upright plane is a wall when it rises this high
+    wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
     dbscan_method: int = 2  # 1: one (eps, MinPts) for all classes; 2: one per class (paper)
     k_max: int = 30  # largest K of the KANN eps_K candidates
-    min_cluster_points: int = 100  # clusters smaller than this go back to label 0
+    cluster_voxel_m: float = 0.03  # DBSCAN runs on the centroids of voxels this size; 0 = points
+    dbscan_rule: str = "plateau"  # K choice: "plateau" (selection.py) or "literal" (PAPER.md)
+    plateau_tolerance: float = 0.25  # "plateau": large-cluster counts may vary by this share
+    min_cluster_points: int = 30  # clusters smaller than this go back to label 0 ...
+    min_cluster_area_m2: float = 0.01  # ... or smaller than this surface at the class's density
     full_curves: bool = False  # run DBSCAN for every K, not only until the stable run ends
     regrowth: bool = True  # recover unlabelled points around each cluster
+    object_gap_m: float = 0.15  # regrowth: same-class clusters this close are one object
     seed: int = 0  # RANSAC sampling
 
     def __post_init__(self) -> None:
         checks = {
             "plane_distance_m": (self.plane_distance_m, 1e-4, 1.0),
-            "plane_min_points": (self.plane_min_points, 3, 10**9),
+            "plane_min_points": (self.plane_min_points, 0, 10**9),
+            "plane_min_area_m2": (self.plane_min_area_m2, 0.0, 10**6),
+            "plane_min_share": (self.plane_min_share, 0.0, 1.0),
             "plane_max_remaining": (self.plane_max_remaining, 0, 10**9),
             "plane_iterations": (self.plane_iterations, 1, 100_000),
             "plane_sample_points": (self.plane_sample_points, 0, 10**9),
@@ -51,11 +61,28 @@ class RefineConfig:
             "dbscan_method": (self.dbscan_method, 1, 2),
             "k_max": (self.k_max, 3, 1000),
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
+            "object_gap_m": (self.object_gap_m, 0.0, 10.0),
+            "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
+            "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),
             "seed": (self.seed, 0, 2**31 - 1),
         }
         for name, (value, low, high) in checks.items():
             if not low <= value <= high:
                 raise ConfigError(f"refinement.{name} must be in {low}..{high}, got {value}")
+        if 0 < self.plane_min_points < 3:
+            raise ConfigError(
+                "refinement.plane_min_points must be 0 (relative to the cloud) or >= 3, "
+                f"got {self.plane_min_points}"
+            )
+        if self.dbscan_rule not in RULES:
+            raise ConfigError(
+                f"refinement.dbscan_rule must be one of {', '.join(RULES)}, "
+                f"got {self.dbscan_rule!r}"
+            )
+        if not 0.0 <= self.plateau_tolerance <= 1.0:
+            raise ConfigError(
+                f"refinement.plateau_tolerance must be in 0..1, got {self.plateau_tolerance}"
+            )
         if 0 < self.plane_sample_points < 3:
             raise ConfigError(
                 "refinement.plane_sample_points must be 0 (all points) or >= 3, "

@@ -2,7 +2,9 @@
 
 eps_K is the mean distance to the K-th nearest neighbour (KANN), MinPts_K the mean number of
 points within eps_K (the point itself included, never below 4); DBSCAN runs for K = 1, 2, ...
-and the largest K of the first run of >= 3 equal cluster counts is chosen.
+and K is chosen from the cluster counts by a rule of selection.py: PAPER.md's literal one (the
+largest K of the first run of >= 3 equal counts) or, by default, a plateau of the count of
+clusters above the size threshold.
 
 DBSCAN is our own, on SciPy's cKDTree, rather than Open3D's `cluster_dbscan`: Open3D searches
 the neighbourhoods again on every call, while here one query of 2 K_max + 1 neighbours per point
@@ -24,10 +26,11 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from process.refine.selection import plateau_choice, stable_choice, stable_run_closed
+
 logger = logging.getLogger(__name__)
 
 MIN_PTS_FLOOR = 4  # the paper: MinPts >= 4 for 3-D points
-STABLE_RUN = 3  # KANN-DBSCAN: the cluster count is stable when 3 consecutive K agree
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,7 @@ class KannCurves:
     eps_m: npt.NDArray[np.float64]  # (K,) mean K-th neighbour distance
     min_pts: npt.NDArray[np.int64]  # (K,) mean count within eps_K, at least 4
     n_clusters: npt.NDArray[np.int64]  # (K,) DBSCAN clusters; -1 where DBSCAN was not run
+    n_big: npt.NDArray[np.int64] | None = None  # (K,) clusters of >= the size threshold (core)
 
 
 @dataclass(frozen=True)
@@ -47,8 +51,10 @@ class DbscanChoice:
     k: int
     eps_m: float
     min_pts: int
-    stable: bool  # False: no stable run of cluster counts, the fallback chose
+    stable: bool  # False: no stable run (plateau) of cluster counts, the fallback chose
     note: str
+    rule: str = "literal"  # "literal" (PAPER.md) or "plateau" (selection.py)
+    min_size: int = 1  # clusters with fewer points go back to label 0
 
 
 def query_size(k_max: int) -> int:
@@ -181,58 +187,23 @@ class NeighbourTable:
                 out[i] = out[found[np.argmin(gaps)]]
 
 
-def stable_choice(n_clusters: npt.NDArray[np.int64]) -> tuple[int, bool, str]:
-    """Return (index of the chosen K, stable?, note) from the cluster counts of K = 1, 2, ...
-
-    The first run of >= 3 equal, non-zero counts is the stable interval and its largest K is
-    chosen. Fallback when there is none: the largest K of the longest run of non-zero counts
-    (the later run on ties); when no K gives a cluster, the largest K.
-    """
-    runs = _runs(n_clusters)
-    for start, end, value in runs:
-        if value > 0 and end - start + 1 >= STABLE_RUN:
-            return end, True, f"stable: {value} clusters for K={start + 1}..{end + 1}"
-    positive = [r for r in runs if r[2] > 0]
-    if not positive:
-        last = len(n_clusters) - 1
-        return last, False, f"fallback: no K in 1..{last + 1} gives a cluster; chose K={last + 1}"
-    start, end, value = max(positive, key=lambda r: (r[1] - r[0], r[0]))
-    return (
-        end,
-        False,
-        (
-            f"fallback: no {STABLE_RUN} equal cluster counts in K=1..{len(n_clusters)}; chose the "
-            f"largest K of the longest run ({value} clusters for K={start + 1}..{end + 1})"
-        ),
-    )
-
-
-def _runs(values: npt.NDArray[np.int64]) -> list[tuple[int, int, int]]:
-    """Return (first index, last index, value) of each run of equal consecutive values >= 0."""
-    runs: list[tuple[int, int, int]] = []
-    for i, v in enumerate(int(x) for x in values):
-        if v < 0:
-            break
-        if runs and runs[-1][2] == v:
-            runs[-1] = (runs[-1][0], i, v)
-        else:
-            runs.append((i, i, v))
-    return runs
-
-
-def _stable_run_closed(n_clusters: npt.NDArray[np.int64]) -> bool:
-    """Return whether the counts so far hold a stable run followed by a different count."""
-    runs = _runs(n_clusters)
-    return any(v > 0 and e - s + 1 >= STABLE_RUN for s, e, v in runs[:-1])
-
-
 def estimate_parameters(
-    points: npt.NDArray[np.floating], *, k_max: int, full_curves: bool = False
+    points: npt.NDArray[np.floating],
+    *,
+    k_max: int,
+    full_curves: bool = False,
+    rule: str = "literal",
+    min_size: int = 1,
+    min_area_m2: float = 0.0,
+    tolerance: float = 0.0,
 ) -> tuple[NeighbourTable, KannCurves, DbscanChoice]:
-    """Choose (eps, MinPts) by KANN and the stable cluster count; return the table for reuse.
+    """Choose (eps, MinPts) by KANN and the cluster-count curve; return the table for reuse.
 
-    Without `full_curves`, DBSCAN stops at the first K after the stable run (the rest of the
-    cluster-count curve reads -1).
+    `rule` "literal" is PAPER.md's first stable run of all clusters; without `full_curves`
+    DBSCAN stops at the first K after it (the rest of the curve reads -1). "plateau" runs
+    every K and picks from the counts of clusters with >= `min_size` core points, within a
+    relative `tolerance` (selection.py). The size threshold is the larger of `min_size` and
+    `min_area_m2` of surface at the cloud's density (`surface_density`).
     """
     n = len(points)
     k_eff = min(k_max, n - 1)
@@ -242,18 +213,38 @@ def estimate_parameters(
     eps = table.kann_eps(k_eff)
     table.bind(eps)
     min_pts = table.min_pts()
+    min_size = max(min_size, round(min_area_m2 * surface_density(table)))
     n_clusters = np.full(k_eff, -1, np.int64)
+    n_big = np.full(k_eff, -1, np.int64)
     for k in range(k_eff):
-        n_clusters[k] = table.cluster(k, int(min_pts[k]))[0]
-        if not full_curves and _stable_run_closed(n_clusters[: k + 1]):
+        count, components, core = table.cluster(k, int(min_pts[k]))
+        n_clusters[k] = count
+        n_big[k] = int((np.bincount(components[core]) >= min_size).sum()) if core.any() else 0
+        if rule == "literal" and not full_curves and stable_run_closed(n_clusters[: k + 1]):
             break
-    index, stable, note = stable_choice(n_clusters)
-    curves = KannCurves(np.arange(1, k_eff + 1), eps, min_pts, n_clusters)
+    if rule == "plateau":
+        index, stable, note = plateau_choice(n_big, relative=tolerance)
+        note = f"{note} ({min_size} points, tolerance {tolerance:g})"
+    else:
+        index, stable, note = stable_choice(n_clusters)
+    curves = KannCurves(np.arange(1, k_eff + 1), eps, min_pts, n_clusters, n_big)
     return (
         table,
         curves,
-        DbscanChoice(index + 1, float(eps[index]), int(min_pts[index]), stable, note),
+        DbscanChoice(
+            index + 1, float(eps[index]), int(min_pts[index]), stable, note, rule, min_size
+        ),
     )
+
+
+def surface_density(table: NeighbourTable, k: int = 10) -> float:
+    """Return points per m^2 of surface: the mean count within eps_K over the disc pi eps_K^2.
+
+    K = 10 (or the largest bound K) spans a few point spacings: past the jitter of the
+    sampling, short of the surface's curvature.
+    """
+    k = min(k, len(table.eps)) - 1
+    return float(table.counts[k].mean() / (np.pi * table.eps[k] ** 2))
 
 
 def adaptive_dbscan(

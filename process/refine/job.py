@@ -38,7 +38,7 @@ def refine_file(
         CloudError: a cloud file is missing, malformed or has no `label` field.
     """
     start = time.perf_counter()
-    cloud = read_cloud(cloud_path)
+    cloud = read_cloud(cloud_path, min_points=1)
     truth = read_cloud(gt_cloud) if gt_cloud is not None else None
     result = refine(cloud, cfg)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -89,6 +89,7 @@ def refinement_metrics(
     up = result.planes.up
     section["up"] = None if up is None else [float(v) for v in up]
     section["up_source"] = result.planes.up_source
+    section["plane_min_points"] = result.planes.min_points
     section["planes"] = [
         {
             "label": LABEL_NAMES[p.label] if p.label else "none",
@@ -119,6 +120,8 @@ def _clustering(entry: ClassClustering) -> dict[str, Any]:
         "eps_m": None if choice is None else choice.eps_m,
         "min_pts": None if choice is None else choice.min_pts,
         "stable": None if choice is None else choice.stable,
+        "rule": None if choice is None else choice.rule,
+        "min_cluster_points": None if choice is None else choice.min_size,
         "note": "fewer points than min_cluster_points" if choice is None else choice.note,
         "points": entry.points,
         "clusters": entry.clusters,

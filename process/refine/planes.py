@@ -15,7 +15,8 @@ from process.refine.config import RefineConfig
 logger = logging.getLogger(__name__)
 
 _PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
-_SNAP_UP_DEG = 30.0  # a given `up` is replaced by the normal of the largest plane this close to it
+_DENSITY_RADIUS_M = 0.05  # disc over which the cloud's surface density is counted
+_SNAP_UP_DEG = 40.0  # a given `up` is replaced by the normal of the largest plane this close to it
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,8 @@ class PlaneSegmentation:
     labels: npt.NDArray[np.uint8]  # (N,) 1/2/3 on structural planes, 0 elsewhere
     up: npt.NDArray[np.float64] | None  # (3,) unit gravity-up; None when it could not be found
     up_source: str  # "argument", "argument snapped to plane", "largest plane" or "none"
+    min_points: int = 0  # the Min used: a plane needs this many inliers
+    density_per_m2: float = math.nan  # the cloud's surface density it was derived from
 
     @property
     def structural(self) -> npt.NDArray[np.bool_]:
@@ -50,28 +53,55 @@ def segment_planes(
     *,
     up: npt.NDArray[np.float64] | None,
 ) -> PlaneSegmentation:
-    """Find planes until one has fewer than Min inliers or fewer than Max points remain."""
+    """Find planes until one has fewer than Min inliers or fewer than Max points remain.
+
+    Min is `cfg.plane_min_points` when set, else relative to the cloud (`min_plane_points`).
+    """
     rng = np.random.default_rng(cfg.seed)
+    min_points, density = min_plane_points(points, cfg, rng)
     remaining = np.arange(len(points))
     found: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]] = []
     while (
         len(found) < cfg.max_planes
         and len(remaining) > cfg.plane_max_remaining
-        and len(remaining) >= cfg.plane_min_points
+        and len(remaining) >= min_points
     ):
         model, inliers = _ransac_plane(points[remaining], cfg, rng)
-        if len(inliers) < cfg.plane_min_points:
+        if len(inliers) < min_points:
             break
         found.append((model, remaining[inliers]))
         remaining = np.delete(remaining, inliers)
     up_used, source = _gravity(points, found, up, cfg)
     heights = None if up_used is None else points @ up_used.astype(np.float32)
-    planes = tuple(_classify(points, m, idx, heights, up_used, cfg) for m, idx in found)
+    planes = tuple(_classify(points, m, idx, heights, up_used, cfg, min_points) for m, idx in found)
     labels = np.zeros(len(points), np.uint8)
     for plane in planes:
         labels[plane.removed] = plane.label
-    logger.debug("planes: %s", [(p.label, len(p.indices)) for p in planes])
-    return PlaneSegmentation(planes, labels, up_used, source)
+    logger.debug("planes (Min %d): %s", min_points, [(p.label, len(p.indices)) for p in planes])
+    return PlaneSegmentation(planes, labels, up_used, source, min_points, density)
+
+
+def min_plane_points(
+    points: npt.NDArray[np.float32], cfg: RefineConfig, rng: np.random.Generator
+) -> tuple[int, float]:
+    """Return (Min, surface density per m^2): the configured Min, else one relative to the cloud.
+
+    The relative Min is the smaller of `plane_min_area_m2` at the cloud's density and
+    `plane_min_share` of its points, at least 3. The density is the mean count of points
+    within 5 cm of 2,000 random points over the disc of 5 cm: a voxel map at 2 cm gives
+    ~2,500 per m^2, so a floor needs 1 m^2 of it seen.
+    """
+    if len(points) < 3:
+        return max(cfg.plane_min_points, 3), math.nan
+    from scipy.spatial import cKDTree
+
+    probe = points[rng.choice(len(points), min(2000, len(points)), replace=False)]
+    counts = cKDTree(points).query_ball_point(probe, _DENSITY_RADIUS_M, return_length=True)
+    density = float(np.mean(counts) / (math.pi * _DENSITY_RADIUS_M**2))
+    if cfg.plane_min_points:
+        return cfg.plane_min_points, density
+    by_area, by_share = cfg.plane_min_area_m2 * density, cfg.plane_min_share * len(points)
+    return max(3, round(min(by_area, by_share))), density
 
 
 def _ransac_plane(
@@ -145,11 +175,17 @@ def _classify(
     heights: npt.NDArray[np.float32] | None,  # (N,) every point's height along up
     up: npt.NDArray[np.float64] | None,
     cfg: RefineConfig,
+    min_points: int,
 ) -> Plane:
-    """Classify a plane: level and lowest = floor, level and highest = ceiling, upright = wall.
+    """Classify a plane by its orientation and position along `up`, not by its size.
 
-    Only the plane's large connected pieces count: RANSAC's infinite plane also takes the
-    coplanar faces of furniture far from the wall or floor, which must stay objects.
+    Floor: level, at the bottom of the cloud, with the room rising `wall_min_height_m` above
+    it. Ceiling: level, at the top, that far above the bottom. Wall: upright, rising that high
+    above the bottom and spanning half of it itself. A table top seen from above is level and
+    at the bottom of a table scene, but nothing rises a room's height above it: it stays an
+    object. Only the plane's large
+    connected pieces count: RANSAC's infinite plane also takes the coplanar faces of furniture
+    far from the wall or floor, which must stay objects.
     """
     none = np.zeros(0, np.intp)
     if up is None or heights is None:
@@ -157,26 +193,35 @@ def _classify(
     cosine = abs(float(model[:3] @ up))
     tolerance = math.radians(cfg.horizontal_tolerance_deg)
     level, upright = cosine >= math.cos(tolerance), cosine <= math.sin(tolerance)
-    pieces = _large_pieces(points[indices], model, cfg) if level or upright else None
-    if pieces is None or int(pieces.sum()) < cfg.plane_min_points:
+    pieces = _large_pieces(points[indices], model, min_points) if level or upright else None
+    if pieces is None or int(pieces.sum()) < min_points:
         return Plane(model, indices, 0, none, float(heights[indices].mean()))
     kept = indices[pieces]
     height = float(heights[kept].mean())
     low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
     label = 0
-    if level and height - low <= cfg.structure_height_tol_m:
+    room = cfg.wall_min_height_m
+    if level and height - low <= cfg.structure_height_tol_m and high - height >= room:
         label = Label.FLOOR
-    elif level and high - height <= cfg.structure_height_tol_m:
+    elif level and high - height <= cfg.structure_height_tol_m and height - low >= room:
         label = Label.CEILING
-    elif upright and float(np.percentile(heights[kept], 99.0)) - low >= cfg.wall_min_height_m:
-        label = (
-            Label.WALL
-        )  # upright and rising well above the floor: chair backs and desk sides do not
+    elif upright and _is_wall(heights[kept], low, cfg.wall_min_height_m):
+        label = Label.WALL
     return Plane(model, indices, label, kept if label else none, height)
 
 
+def _is_wall(heights: npt.NDArray[np.float32], low: float, room_m: float) -> bool:
+    """Return whether an upright plane rises `room_m` above the floor and spans half of it.
+
+    Chair backs and desk sides do not rise so high; a television or a whiteboard on a wall
+    rises high but spans well under a metre, and stays an object.
+    """
+    bottom, top = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
+    return top - low >= room_m and top - bottom >= room_m / 2
+
+
 def _large_pieces(
-    points: npt.NDArray[np.float32], model: npt.NDArray[np.float64], cfg: RefineConfig
+    points: npt.NDArray[np.float32], model: npt.NDArray[np.float64], min_points: int
 ) -> npt.NDArray[np.bool_]:
     """Return the inliers in the largest connected piece, or in any piece of >= Min points."""
     from scipy import ndimage
@@ -193,6 +238,6 @@ def _large_pieces(
     pieces, _ = ndimage.label(grid, structure=np.ones((3, 3), bool))
     piece = pieces[ij[:, 0], ij[:, 1]]
     sizes = np.bincount(piece)
-    big = (sizes >= cfg.plane_min_points) | (np.arange(len(sizes)) == sizes.argmax())
+    big = (sizes >= min_points) | (np.arange(len(sizes)) == sizes.argmax())
     kept: npt.NDArray[np.bool_] = big[piece]
     return kept

@@ -1,11 +1,15 @@
-"""Step 4: regrowth of unlabelled points around each cluster (paper section 2.4.2, PAPER.md).
+"""Step 4: regrowth of unlabelled points around each object (paper section 2.4.2, PAPER.md).
 
-A point with label 0 joins a cluster when it lies within r1 (the eps chosen for the cluster's
-class) of a point already in the cluster and within r2 (half the diagonal of the cluster's
-axis-aligned bounding box, Eq. 7-8) of the cluster's centroid. Growth runs in waves, each wave
-testing the remaining unlabelled points against the points that joined in the previous one,
-until no point joins. A point that two clusters reach in the same wave goes to the nearer one:
-the cluster of its nearest qualifying frontier point.
+Clusters are grouped into objects first: clusters of one class whose bounding boxes, grown by
+`gap_m`, overlap are one object (DBSCAN splits a table with a missed patch across its top
+into pieces; the paper's r2 is an object's size, Table 10). A point with label 0 joins a
+cluster when it lies within r1 (the eps chosen for the cluster's class) of a point already in
+it and inside its object: the object's axis-aligned box grown by r1. That box lies within r2
+(half its diagonal, Eq. 7-8) of its centre, the paper's sphere, but does not reach into the
+neighbours beside a long table. Growth runs in waves, each wave testing the remaining
+unlabelled points against the points that joined in the previous one, until no point joins.
+A point that two clusters reach in the same wave goes to the nearer one: the cluster of its
+nearest qualifying frontier point.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, nearest first
+_FLOOR_PERCENTILE = 0.5  # the floor under the objects: this low a percentile of their heights
 
 
 @dataclass(frozen=True)
@@ -26,7 +31,8 @@ class Regrowth:
     labels: npt.NDArray[np.uint8]  # (N,)
     clusters: npt.NDArray[np.int32]  # (N,)
     regrown: npt.NDArray[np.intp]  # indices of the points that joined a cluster
-    r2_m: dict[int, float]  # cluster id -> r2
+    r2_m: dict[int, float]  # cluster id -> r2 of its object
+    objects: dict[int, int]  # cluster id -> object id (1..)
     waves: int
 
 
@@ -36,6 +42,8 @@ def regrow(
     clusters: npt.NDArray[np.int32],
     *,
     r1_m: dict[int, float],
+    gap_m: float = 0.0,
+    up: npt.NDArray[np.float64] | None = None,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -44,12 +52,21 @@ def regrow(
         labels: (N,) class per point, 0 = unlabelled (the candidates).
         clusters: (N,) cluster id per point, 0 = none; every cluster has one class.
         r1_m: class label -> r1 (the class's chosen eps).
+        gap_m: clusters of one class whose boxes come this close are one object.
+        up: gravity-up; boxes are then taken in a frame with z up, and each object's box
+            reaches down to the floor (the lowest points): furniture stands on legs, bases
+            and stems that a segmentation misses first.
     """
     labels, clusters = labels.copy(), clusters.copy()
+    if up is not None:
+        points = (points.astype(np.float64) @ _frame(up).T).astype(np.float32)
     ids = np.unique(clusters[clusters > 0])
     if len(ids) == 0:
-        return Regrowth(labels, clusters, np.zeros(0, np.intp), {}, 0)
-    table = _cluster_table(points, labels, clusters, ids, r1_m)
+        return Regrowth(labels, clusters, np.zeros(0, np.intp), {}, {}, 0)
+    table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m)
+    if up is not None and len(points):
+        floor = float(np.percentile(points[:, 2], _FLOOR_PERCENTILE))
+        table.low[:, 2] = np.minimum(table.low[:, 2], floor)
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
     frontier = np.flatnonzero(clusters > 0)
     open_ = np.flatnonzero(labels == 0)
@@ -66,15 +83,18 @@ def regrow(
         frontier, waves = joined, waves + 1
     regrown = np.concatenate(grown) if grown else np.zeros(0, np.intp)
     r2 = {int(i): float(r) for i, r in zip(ids, table.r2, strict=True)}
-    return Regrowth(labels, clusters, np.sort(regrown), r2, waves)
+    objects = {int(i): int(o) + 1 for i, o in zip(ids, table.object, strict=True)}
+    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves)
 
 
 @dataclass(frozen=True)
 class _Clusters:
     label: npt.NDArray[np.uint8]  # (C,) class of each cluster
-    centroid: npt.NDArray[np.float64]  # (C, 3)
+    object: npt.NDArray[np.int64]  # (C,) object of each cluster, 0..
+    low: npt.NDArray[np.float64]  # (C, 3) its object's box grown by r1
+    high: npt.NDArray[np.float64]  # (C, 3)
     r1: npt.NDArray[np.float64]  # (C,)
-    r2: npt.NDArray[np.float64]  # (C,) half the AABB diagonal
+    r2: npt.NDArray[np.float64]  # (C,) half the diagonal of its object's box
 
 
 def _cluster_table(
@@ -83,22 +103,52 @@ def _cluster_table(
     clusters: npt.NDArray[np.int32],
     ids: npt.NDArray[np.int32],
     r1_m: dict[int, float],
+    gap_m: float,
 ) -> _Clusters:
     member = np.flatnonzero(clusters > 0)
     row = np.searchsorted(ids, clusters[member])
-    count = np.bincount(row, minlength=len(ids)).astype(np.float64)
     xyz = points[member].astype(np.float64)
-    centroid = (
-        np.stack([np.bincount(row, xyz[:, a], len(ids)) for a in range(3)], 1) / count[:, None]
-    )
     low = np.full((len(ids), 3), np.inf)
     high = np.full((len(ids), 3), -np.inf)
     np.minimum.at(low, row, xyz)
     np.maximum.at(high, row, xyz)
     label = np.zeros(len(ids), np.uint8)
     label[row] = labels[member]
+    obj = _objects(label, low, high, gap_m)
+    o_low = np.full((obj.max() + 1, 3), np.inf)
+    o_high = np.full((obj.max() + 1, 3), -np.inf)
+    np.minimum.at(o_low, obj, low)
+    np.maximum.at(o_high, obj, high)
     r1 = np.array([r1_m.get(int(c), 0.0) for c in label])
-    return _Clusters(label, centroid, r1, np.linalg.norm(high - low, axis=1) / 2)
+    r2 = np.linalg.norm(o_high - o_low, axis=1)[obj] / 2
+    return _Clusters(label, obj, o_low[obj] - r1[:, None], o_high[obj] + r1[:, None], r1, r2)
+
+
+def _frame(up: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Return a rotation whose third row is the unit `up` (points @ R.T have z along up)."""
+    z = np.asarray(up, np.float64) / np.linalg.norm(up)
+    x = np.cross([0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z])
+
+
+def _objects(
+    label: npt.NDArray[np.uint8],
+    low: npt.NDArray[np.float64],
+    high: npt.NDArray[np.float64],
+    gap_m: float,
+) -> npt.NDArray[np.int64]:
+    """Return an object id per cluster: same-class clusters whose grown boxes overlap, chained."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    lo, hi = low - gap_m / 2, high + gap_m / 2
+    touch = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
+    touch &= label[:, None] == label[None]
+    a, b = np.nonzero(touch)
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(label),) * 2)
+    objects: npt.NDArray[np.int64] = connected_components(graph, directed=False)[1].astype(np.int64)
+    return objects
 
 
 def _wave(
@@ -119,8 +169,9 @@ def _wave(
     distance, nearest = distance[near], nearest[near]
     hit = np.isfinite(distance)
     rows = np.where(hit, frontier_row[np.minimum(nearest, len(frontier) - 1)], 0)
-    to_centroid = np.linalg.norm(points[open_[near]][:, None, :] - table.centroid[rows], axis=2)
-    ok = hit & (distance <= table.r1[rows]) & (to_centroid <= table.r2[rows])
+    xyz = points[open_[near]].astype(np.float64)[:, None, :]
+    inside = np.all((xyz >= table.low[rows]) & (xyz <= table.high[rows]), axis=2)
+    ok = hit & (distance <= table.r1[rows]) & inside
     joins = ok.any(axis=1)
     first = ok[joins].argmax(axis=1)  # nearest qualifying frontier point
     return open_[near[joins]], rows[joins, first]

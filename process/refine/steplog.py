@@ -50,14 +50,23 @@ def _log_curves(entry: ClassClustering, viz: Logger) -> None:
         if entry.label and entry.choice is None:
             viz.log_text(f"adaptive DBSCAN {name}: {entry.points} points, too few for a cluster")
         return
-    ran = entry.curves.n_clusters >= 0
+    # the count the rule chose from: all clusters (literal) or those above the size (plateau)
+    counts = entry.curves.n_clusters
+    if entry.choice.rule == "plateau" and entry.curves.n_big is not None:
+        counts = entry.curves.n_big
+    ran = counts >= 0
     viz.log_dbscan_curves(
         name,
         ks=entry.curves.ks[ran],
         eps_m=entry.curves.eps_m[ran],
         min_pts=entry.curves.min_pts[ran].astype(np.float64),
-        n_clusters=entry.curves.n_clusters[ran],
+        n_clusters=counts[ran],
         chosen_k=entry.choice.k,
     )
     level = "INFO" if entry.choice.stable else "WARN"
-    viz.log_text(f"adaptive DBSCAN {name}: {entry.choice.note}", level=level)
+    choice = entry.choice
+    viz.log_text(
+        f"adaptive DBSCAN {name}: K={choice.k} eps={choice.eps_m:.3f} m MinPts={choice.min_pts}"
+        f" ({choice.rule}) {choice.note}",
+        level=level,
+    )

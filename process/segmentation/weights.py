@@ -37,6 +37,8 @@ SAMPLES_CHECKPOINT: Final = (
 IMAGENET_MEAN: Final = (0.485, 0.456, 0.406)
 IMAGENET_STD: Final = (0.229, 0.224, 0.225)
 TORCHVISION_PREFIX: Final = "torchvision:"
+MAX_CHANNELS: Final = 2048  # the largest head of any preset is 256 channels
+MAX_ATROUS_RATE: Final = 256
 
 
 @dataclass(frozen=True)
@@ -199,10 +201,31 @@ def _read(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
     return {k: v for k, v in data.items() if isinstance(v, torch.Tensor)}, {}
 
 
+def check_arch_bounds(arch: ArchConfig, path: Path | None) -> ArchConfig:
+    """Refuse architectures whose layers would be absurdly large, before anything is allocated.
+
+    A checkpoint's metadata is data: a corrupt or hostile one asking for 2**20 ASPP channels
+    would allocate gigabytes in DeepLab's constructor before the weights are found not to fit.
+    """
+    sizes = {
+        "aspp_channels": arch.aspp_channels,
+        "decoder_channels": arch.decoder_channels,
+        "low_level_channels": arch.low_level_channels,
+    }
+    too_big = {k: v for k, v in sizes.items() if v > MAX_CHANNELS}
+    rates = [r for r in arch.atrous_rates if r > MAX_ATROUS_RATE]
+    if too_big or rates:
+        raise ModelError(
+            f"checkpoint metadata asks for {too_big or ''} {rates or ''}; expected channels <= "
+            f"{MAX_CHANNELS} and atrous rates <= {MAX_ATROUS_RATE} (corrupt metadata?): {path}"
+        )
+    return arch
+
+
 def _ours(tensors: dict[str, torch.Tensor], meta: dict[str, Any], path: Path) -> Checkpoint:
     try:
         return Checkpoint(
-            arch=ArchConfig.from_json(meta["architecture"]),
+            arch=check_arch_bounds(ArchConfig.from_json(meta["architecture"]), path),
             state_dict=tensors,
             class_to_label=tuple(int(v) for v in json.loads(meta["class_to_label"])),
             mean=_triple(json.loads(meta["mean"])),

@@ -95,3 +95,20 @@ def test_later_stages_imply_earlier_ones(spec: str, stages: tuple[str, ...]) -> 
 def test_an_unknown_stage_lists_the_valid_ones() -> None:
     with pytest.raises(ConfigError, match="valid stages, in order: odometry, segmentation"):
         resolve_stages("odometry,slam")
+
+
+def test_viz_full_fidelity_options_reach_the_logger(tmp_path: Path) -> None:
+    cfg = load_config(write(tmp_path, "[viz]\ncompress = false\ndepth_every_n = 1\n"))
+    assert cfg.viz.logger_options() == {"compress": False, "jpeg_quality": 70, "depth_every_n": 1}
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [("jpeg_quality = 0", "viz.jpeg_quality"), ("depth_every_n = 0", "viz.depth_every_n")],
+)
+def test_viz_options_out_of_range_are_one_line_errors(
+    tmp_path: Path, text: str, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match) as info:
+        load_config(write(tmp_path, f"[viz]\n{text}\n"))
+    assert "\n" not in str(info.value)

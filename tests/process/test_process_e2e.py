@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 import pytest
-from helpers_viz import read_rrd, rerun_verify
+from helpers_viz import RrdContents, assert_rrd_verifies, read_rrd, rerun_verify
 from typer.testing import CliRunner
 
 from capture.recording import RecordingReader, RecordingWriter
@@ -29,6 +29,7 @@ OUTPUTS = (
     outputs.TRAJECTORY,
     outputs.METRICS,
     outputs.CONFIG,
+    outputs.PREVIEW,
 )
 PER_FRAME_ENTITIES = (
     "/world/camera",
@@ -52,7 +53,7 @@ def run_twice(sim_recording: Path, tmp_path_factory: pytest.TempPathFactory) -> 
     first = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert first.exit_code == 0, first.output
     mtimes = {name: (out / name).stat().st_mtime_ns for name in OUTPUTS}
-    second = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
+    second = runner.invoke(app, ["run", str(sim_recording), "--out", str(out), "--force"])
     assert second.exit_code == 0, second.output
     return {"out": out, "mtimes": mtimes, "output": second.output}
 
@@ -113,7 +114,9 @@ def test_the_trajectory_is_tum_and_near_the_ground_truth(
 
 def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     metrics = json.loads((run_twice["out"] / outputs.METRICS).read_text())
-    assert set(metrics) == {"odometry", "segmentation", "refinement", "seconds", "stages", "job"}
+    expected = {"odometry", "segmentation", "refinement", "seconds", "stages", "job", "preview"}
+    assert set(metrics) == expected
+    assert metrics["preview"] == outputs.PREVIEW
     odo = metrics["odometry"]
     assert {"frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"} <= set(odo)
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
@@ -132,6 +135,19 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     job = metrics["job"]
     assert job["frames"] == 30 and job["fps"] == pytest.approx(30 / job["wall_s"], rel=0.01)
     assert sum(job["bottleneck_share"].values()) == pytest.approx(1.0, abs=0.002)
+
+
+def test_the_preview_is_a_small_top_view_of_the_refined_map(run_twice: dict[str, Any]) -> None:
+    import cv2
+
+    from capture.recording import LABEL_COLORS
+
+    path = run_twice["out"] / outputs.PREVIEW
+    assert path.stat().st_size < 200_000
+    rgb = np.asarray(cv2.imread(str(path)), np.uint8)[..., ::-1]
+    refined = read_cloud(run_twice["out"] / outputs.MAP_REFINED)
+    main_label = int(np.bincount(refined.labels[refined.labels != 1]).argmax())  # not ceiling
+    assert np.all(rgb == LABEL_COLORS[main_label], axis=-1).sum() > 500
 
 
 def test_a_recording_without_ground_truth_runs_and_says_so(
@@ -154,6 +170,7 @@ def test_a_recording_without_ground_truth_runs_and_says_so(
     assert metrics["odometry"]["frames"] == 5
     assert "ate_rmse_m" not in metrics["odometry"]
     assert "no ground truth" in caplog.text
+    assert_rrd_verifies(out / outputs.RRD)
 
 
 def test_an_unfinished_recording_replays_its_recovered_frames(
@@ -177,7 +194,7 @@ def test_an_unfinished_recording_replays_its_recovered_frames(
     assert 10 <= frames <= 20  # all but the chunk still open when it was killed
 
 
-def test_ctrl_c_leaves_no_partial_file_and_says_what_was_written(
+def test_ctrl_c_leaves_no_file_and_says_so(
     sim_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     def interrupt(*_: object) -> None:
@@ -187,14 +204,14 @@ def test_ctrl_c_leaves_no_partial_file_and_says_what_was_written(
     out = tmp_path / "out"
     result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert result.exit_code == 1
-    assert "interrupted; complete files written: config.toml" in result.output
-    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+    assert f"interrupted; no output was written and {out} is as it was" in result.output
+    assert list(out.iterdir()) == []  # not even the staging folder
 
 
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["run", "absent.mcap", "--out", "o"], "error: recording not found: absent.mcap"),
+        (["run", "absent.mcap", "--out", "o"], "error: expected a recording file, found none"),
         (["run", "{nav2}", "--out", "o"], "error: no colour topic"),
         (["run", "{rec}", "--out", "o", "--stages", "slam"], "error: unknown stage(s) ['slam']"),
         (["run", "{rec}", "--out", "o", "--weights", "absent.pt"], "error: segmentation weights"),
@@ -254,6 +271,41 @@ def test_images_every_n_thins_the_rrd_but_keeps_every_pose_and_keyframe(
     assert contents.rows[("/world/camera", "frame")] == 30
 
 
+def _odometry_rrd(sim_recording: Path, tmp_path: Path, viz: str) -> RrdContents:
+    """Run the odometry stage with a [viz] section; return what its .rrd holds."""
+    config = tmp_path / "viz.toml"
+    config.write_text(f"[viz]\n{viz}\n")
+    out = tmp_path / "out"
+    args = ["run", str(sim_recording), "--out", str(out), "--stages", "odometry"]
+    result = runner.invoke(app, [*args, "--config", str(config)])
+    assert result.exit_code == 0, result.output
+    return read_rrd(out / outputs.RRD)
+
+
+def test_by_default_colour_is_every_frame_and_depth_on_keyframes_and_every_nth(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    contents = _odometry_rrd(sim_recording, tmp_path, "depth_every_n = 20")
+    keyframes = set(contents.values("/world/trajectory/keyframes", "frame"))
+    assert 0 < len(keyframes) < 30
+    assert contents.rows[("/world/camera/image/rgb", "frame")] == 30
+    assert set(contents.values("/world/camera/image/rgb", "EncodedImage:media_type")) == {
+        "image/jpeg"
+    }
+    for entity in ("/world/camera/image/depth", "/world/camera/image/depth_registered"):
+        assert set(contents.values(entity, "frame")) == keyframes | {0, 20}, entity
+
+
+def test_full_fidelity_logs_raw_colour_and_depth_of_every_frame(
+    sim_recording: Path, tmp_path: Path
+) -> None:
+    contents = _odometry_rrd(sim_recording, tmp_path, "compress = false\ndepth_every_n = 1")
+    for entity in ("rgb", "depth", "depth_registered"):
+        assert contents.rows[(f"/world/camera/image/{entity}", "frame")] == 30, entity
+    assert contents.values("/world/camera/image/rgb", "Image:buffer").size == 30 * 480 * 640 * 3
+    assert "DepthImage:buffer" in contents.columns["/world/camera/image/depth"]
+
+
 def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(
     sim_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -265,7 +317,7 @@ def test_a_failing_stage_is_one_line_and_leaves_no_partial_rrd(
     result = runner.invoke(app, ["run", str(sim_recording), "--out", str(out)])
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1] == "error: segmentation failed on purpose"
-    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+    assert list(out.iterdir()) == []
 
 
 def test_fusion_places_keyframes_at_their_final_poses(
@@ -305,13 +357,14 @@ def test_sigterm_is_handled_like_ctrl_c(sim_recording: Path, tmp_path: Path) -> 
         text=True,
     )
     deadline = time.monotonic() + 60
-    while not (out / outputs.CONFIG).exists() and time.monotonic() < deadline:
+    staged_config = out / f"{outputs.STAGING_PREFIX}{child.pid}" / outputs.CONFIG
+    while not staged_config.exists() and time.monotonic() < deadline:
         time.sleep(0.02)  # config.toml is written first: the run has started
     child.send_signal(signal.SIGTERM)
     _, err = child.communicate(timeout=60)
     assert child.returncode == 1, err
-    assert "error: interrupted; complete files written: config.toml" in err
-    assert sorted(p.name for p in out.iterdir()) == [outputs.CONFIG]
+    assert "error: interrupted; no output was written" in err
+    assert list(out.iterdir()) == []
 
 
 def test_an_empty_map_is_said_and_refinement_skipped(

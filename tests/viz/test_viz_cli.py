@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from helpers_viz import assert_rrd_verifies
 from typer.testing import CliRunner
 
 from viz import cli
@@ -21,6 +22,7 @@ runner = CliRunner()
 def rrd(tmp_path: Path) -> Path:
     path = tmp_path / "recording.rrd"
     RerunLogger(path, recording_name="cli").close()
+    assert_rrd_verifies(path)
     return path
 
 

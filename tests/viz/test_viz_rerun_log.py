@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
+import cv2
 import numpy as np
+import numpy.typing as npt
 import pytest
-from helpers_viz import RrdContents, read_rrd, rerun_verify
+from helpers_viz import RrdContents, assert_rrd_verifies, read_rrd, rerun_verify
 
 from capture.recording import LABEL_NAMES, RecordingReader
 from viz import layout
@@ -17,22 +20,28 @@ from viz.rerun_log import RerunLogger
 STAMPS_NS = [1_000_000_000 + i * 33_333_333 for i in range(5)]  # those of the `recording` fixture
 
 
-def _log_recording(recording: Path, rrd: Path) -> RrdContents:
-    """Log the 5 frames as the pipeline does (keyframes 0, 2, 4; tracking lost at frame 3)."""
+def _log_recording(recording: Path, rrd: Path, **options: Any) -> RrdContents:
+    """Log the 5 frames as the pipeline does (keyframes 2, 4; tracking lost at frame 3)."""
     rng = np.random.default_rng(1)
-    with RerunLogger(rrd, recording_name="synthetic") as log, RecordingReader(recording) as rec:
+    with (
+        RerunLogger(rrd, recording_name="synthetic", **options) as log,
+        RecordingReader(recording) as rec,
+    ):
         for frame in rec.frames():
+            keyframe = frame.index in (2, 4)
             log.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-            log.log_frame(frame)
-            log.log_registered_depth(np.full((480, 640), 1.5, np.float32))
+            log.log_frame(frame, keyframe=keyframe)
+            log.log_registered_depth(np.full((480, 640), 1.5, np.float32), keyframe=keyframe)
             assert frame.ground_truth is not None
             assert frame.ground_truth.world_from_camera is not None
-            log.log_pose(frame.ground_truth.world_from_camera, keyframe=frame.index % 2 == 0)
+            log.log_pose(frame.ground_truth.world_from_camera, keyframe=keyframe)
             xy = rng.uniform(0, 600, (40, 2))
             log.log_keypoints(xy, inliers=np.arange(40) < 30, matched_xy=xy + 2.0)
             lost = frame.index == 3
             log.log_tracking(30, status="lost" if lost else "ok", event="lost" if lost else None)
-            log.log_segmentation(np.full((480, 640), 4, np.uint8), confidence=np.ones((480, 640)))
+            if keyframe:
+                confidence = np.full((480, 640), 0.5)
+                log.log_segmentation(np.full((480, 640), 4, np.uint8), confidence=confidence)
             log.log_timing("odometry", 0.01)
     return read_rrd(rrd)
 
@@ -42,9 +51,13 @@ def logged(recording: Path, tmp_path: Path) -> RrdContents:
     return _log_recording(recording, tmp_path / "frames.rrd")
 
 
+@pytest.fixture
+def full(recording: Path, tmp_path: Path) -> RrdContents:
+    return _log_recording(recording, tmp_path / "full.rrd", compress=False, depth_every_n=1)
+
+
 def test_every_frame_entity_has_one_row_per_frame_on_both_timelines(logged: RrdContents) -> None:
-    per_frame = [layout.RGB, layout.DEPTH, layout.DEPTH_REGISTERED, layout.SEGMENTATION]
-    per_frame += [layout.CONFIDENCE, layout.KEYPOINTS, layout.MATCHES, layout.CAMERA]
+    per_frame = [layout.RGB, layout.KEYPOINTS, layout.MATCHES, layout.CAMERA]
     per_frame += [layout.TRAJECTORY_TRACKED, layout.PLOT_INLIERS, layout.timing_path("odometry")]
     for entity in per_frame:
         assert logged.rows[(entity, layout.TIMELINE_FRAME)] == 5, entity
@@ -58,14 +71,58 @@ def test_only_our_timelines_are_written(logged: RrdContents) -> None:
     assert timelines == {layout.TIMELINE_FRAME, layout.TIMELINE_CAPTURE_TIME}
 
 
-def test_colour_is_jpeg_and_depth_is_millimetres(logged: RrdContents) -> None:
+def test_depth_and_segmentation_are_on_keyframes_and_every_nth_frame(
+    logged: RrdContents,
+) -> None:
+    for entity in (layout.DEPTH, layout.DEPTH_REGISTERED):
+        assert list(logged.values(entity, layout.TIMELINE_FRAME)) == [0, 2, 4], entity
+    for entity in (layout.SEGMENTATION, layout.CONFIDENCE):
+        assert list(logged.values(entity, layout.TIMELINE_FRAME)) == [2, 4], entity
+
+
+def _png_millimetres(contents: RrdContents, entity: str) -> list[npt.NDArray[Any]]:
+    """Decode the lossless depth PNGs of an entity."""
+    assert set(contents.values(entity, "EncodedDepthImage:media_type")) == {"image/png"}
+    assert set(contents.values(entity, "EncodedDepthImage:meter")) == {1000.0}
+    blobs = contents.column(entity, "EncodedDepthImage:blob")
+    decoded = [cv2.imdecode(np.asarray(b[0], np.uint8), cv2.IMREAD_UNCHANGED) for b in blobs]
+    return [np.asarray(d) for d in decoded]
+
+
+def test_colour_is_jpeg_and_depth_lossless_png_millimetres(logged: RrdContents) -> None:
     assert set(logged.values(layout.RGB, "EncodedImage:media_type")) == {"image/jpeg"}
-    depth = logged.values(layout.DEPTH, "DepthImage:buffer").view(np.uint16)
+    assert set(logged.values(layout.CONFIDENCE, "EncodedImage:media_type")) == {"image/jpeg"}
+    depth = _png_millimetres(logged, layout.DEPTH)
+    assert len(depth) == 3
+    assert all(d.dtype == np.uint16 and d.shape == (480, 640) for d in depth)
+    assert all(np.all(d == 2000) for d in depth)  # the fixture's plane at 2 m
+    assert all(np.all(d == 1500) for d in _png_millimetres(logged, layout.DEPTH_REGISTERED))
+
+
+def test_full_fidelity_logs_raw_colour_and_depth_of_every_frame(
+    full: RrdContents, recording: Path
+) -> None:
+    with RecordingReader(recording) as rec:
+        colours = [frame.color for frame in rec.frames()]
+    rgb = full.values(layout.RGB, "Image:buffer").view(np.uint8).reshape(5, 480, 640, 3)
+    np.testing.assert_array_equal(rgb, np.stack(colours))  # not a bit lost
+    depth = full.values(layout.DEPTH, "DepthImage:buffer").view(np.uint16)
     assert depth.size == 5 * 480 * 640
-    assert np.all(depth == 2000)  # the fixture's plane at 2 m
-    assert set(logged.values(layout.DEPTH, "DepthImage:meter")) == {1000.0}
-    registered = logged.values(layout.DEPTH_REGISTERED, "DepthImage:buffer").view(np.uint16)
+    assert np.all(depth == 2000)
+    assert set(full.values(layout.DEPTH, "DepthImage:meter")) == {1000.0}
+    registered = full.values(layout.DEPTH_REGISTERED, "DepthImage:buffer").view(np.uint16)
+    assert registered.size == 5 * 480 * 640
     assert np.all(registered == 1500)
+    confidence = full.values(layout.CONFIDENCE, "Image:buffer").view(np.uint8)
+    assert np.all(confidence == 128)
+
+
+@pytest.mark.parametrize(
+    ("options", "match"), [({"jpeg_quality": 0}, "jpeg_quality"), ({"depth_every_n": 0}, "depth")]
+)
+def test_bad_options_are_refused(tmp_path: Path, options: dict[str, int], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        RerunLogger(tmp_path / "x.rrd", recording_name="x", **options)  # type: ignore[arg-type]
 
 
 def test_pinhole_is_static_once_with_the_colour_intrinsics(logged: RrdContents) -> None:
@@ -82,7 +139,7 @@ def test_pose_translations_are_the_ground_truth(logged: RrdContents) -> None:
 
 
 def test_keyframes_and_status_changes_are_marked(logged: RrdContents) -> None:
-    assert list(logged.values(layout.TRAJECTORY_KEYFRAMES, layout.TIMELINE_FRAME)) == [0, 2, 4]
+    assert list(logged.values(layout.TRAJECTORY_KEYFRAMES, layout.TIMELINE_FRAME)) == [2, 4]
     status = logged.values(layout.PLOT_TRACKING_STATUS, "StateChange:state")
     assert list(status) == ["ok", "lost", "ok"]
     assert list(logged.values(layout.PLOT_TRACKING_STATUS, layout.TIMELINE_FRAME)) == [0, 3, 4]
@@ -103,6 +160,12 @@ def test_rrd_verifies_and_carries_the_blueprint(logged: RrdContents, tmp_path: P
     assert logged.blueprints == 1
     result = rerun_verify(tmp_path / "frames.rrd")
     assert result.returncode == 0, result.stderr
+
+
+def test_rerun_verify_fails_on_a_truncated_rrd(logged: RrdContents, tmp_path: Path) -> None:
+    data = (tmp_path / "frames.rrd").read_bytes()
+    (tmp_path / "cut.rrd").write_bytes(data[: len(data) // 2])
+    assert rerun_verify(tmp_path / "cut.rrd").returncode != 0
 
 
 def test_annotation_context_is_static_at_root_with_the_eleven_labels(tmp_path: Path) -> None:
@@ -278,6 +341,7 @@ def test_bad_arguments_raise_one_line_value_errors(tmp_path: Path, call, match: 
     ):
         call(log)
     assert "\n" not in str(info.value)
+    assert_rrd_verifies(tmp_path / "bad.rrd")  # what was logged before the error stays readable
 
 
 def test_empty_inputs_of_a_lost_frame_are_logged_and_verify(tmp_path: Path) -> None:

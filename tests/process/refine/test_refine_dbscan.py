@@ -7,7 +7,8 @@ import pytest
 from helpers_refine import blobs, grid_patch, labelled, literal_dbscan, literal_parameters
 
 from process.refine import RefineConfig, refine
-from process.refine.dbscan import NeighbourTable, estimate_parameters, stable_choice
+from process.refine.dbscan import NeighbourTable, estimate_parameters
+from process.refine.selection import stable_choice
 
 
 @pytest.mark.parametrize(

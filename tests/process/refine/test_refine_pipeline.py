@@ -98,10 +98,14 @@ def test_tiny_clouds_are_clean_no_ops(n: int) -> None:
 
 def test_an_unlabelled_cloud_keeps_its_planes_and_clusters_nothing() -> None:
     floor = grid_patch((0.0, 3.0), (0.0, 3.0), step=0.02)
+    wall = grid_patch((0.0, 3.0), (0.04, 2.5), step=0.02)[:, [0, 2, 1]]  # a floor needs a room
+    wall[:, 1] = 3.0
     box = grid_patch((1.0, 1.5), (1.0, 1.5), z=0.5)
-    result = refine(labelled(np.concatenate([floor, box]), 0), RefineConfig(), up=UP)
+    points = np.concatenate([floor, wall, box])
+    result = refine(labelled(points, 0), RefineConfig(), up=UP)
     assert (result.labels_iii[: len(floor)] == 2).all()
-    assert (result.labels_iii[len(floor) :] == 0).all()
+    assert (result.labels_iii[len(floor) : -len(box)] == 3).all()
+    assert (result.labels_iii[-len(box) :] == 0).all()
     assert result.dbscan == {}
 
 

@@ -92,3 +92,50 @@ def test_sor_removes_planted_outliers() -> None:
 
 def test_sor_keeps_a_cloud_too_small_for_statistics() -> None:
     assert sor_inliers(np.zeros((3, 3), np.float32), nb_neighbors=20, std_ratio=2.0).all()
+
+
+def test_min_follows_the_cloud_a_sparse_room_still_has_floor_wall_and_ceiling() -> None:
+    """A 4 cm room of ~11k points: no plane reaches 10,000, the relative Min finds them all."""
+    floor = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)  # 7,500 points, 12 m^2
+    ceiling = grid_patch((0.0, 4.0), (0.0, 1.0), z=2.6, step=0.04)  # 2,500, 4 m^2
+    wall = grid_patch((0.0, 4.0), (0.04, 2.56), step=0.04)[:, [0, 2, 1]]  # upright
+    wall[:, 1] = 3.0
+    chair = grid_patch((1.0, 1.4), (1.0, 1.4), z=0.45, step=0.04)  # 100 points, level, mid-height
+    points = np.concatenate([floor, ceiling, wall, chair])
+    seg = segment_planes(points, RefineConfig(), up=UP)
+    assert 3 <= seg.min_points < 2000  # 1 m^2 at ~625 points per m^2
+    assert seg.density_per_m2 == pytest.approx(625, rel=0.25)
+    n = np.cumsum([len(floor), len(ceiling), len(wall)])
+    assert (seg.labels[: n[0]] == Label.FLOOR).all()
+    assert (seg.labels[n[0] : n[1]] == Label.CEILING).all()
+    assert (seg.labels[n[1] : n[2]] == Label.WALL).all()
+    assert (seg.labels[n[2] :] == 0).all()
+
+
+def test_a_table_top_at_the_bottom_of_a_table_scene_is_no_floor() -> None:
+    """Level and lowest, but nothing rises a room's height above it: it stays an object."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.8), step=0.01)  # 9,600 points
+    mug = grid_patch((0.5, 0.6), (0.3, 0.4), step=0.01)[:, [0, 2, 1]]
+    mug[:, 1] += 0.3
+    seg = segment_planes(np.concatenate([top, mug]), RefineConfig(), up=UP)
+    assert any(len(p.indices) >= len(top) for p in seg.planes)  # the plane is found
+    assert (seg.labels == 0).all()
+    camera_up = np.array([0.0, -1.0, 0.0])  # the same scene in a camera frame, tilted 30 degrees
+    tilt = np.radians(30)
+    rotation = np.array(
+        [[1, 0, 0], [0, -np.sin(tilt), -np.cos(tilt)], [0, np.cos(tilt), -np.sin(tilt)]]
+    )
+    camera = (np.concatenate([top, mug]) @ rotation.T).astype(np.float32)
+    seg = segment_planes(camera, RefineConfig(), up=camera_up)
+    assert seg.up_source == "argument snapped to plane"
+    assert (seg.labels == 0).all()
+
+
+def test_a_screen_high_on_a_stand_is_upright_and_high_but_no_wall() -> None:
+    points, parts = _room()
+    screen = grid_patch((0.5, 1.7), (1.7, 2.3), step=0.01)[:, [0, 2, 1]]  # 1.2 x 0.6 m, upright
+    screen[:, 1] = 1.0  # 1.2-1.8 m above the floor (z = 0.5)
+    seg = segment_planes(np.concatenate([points, screen]), CFG, up=UP)
+    assert any(len(p.indices) >= len(screen) for p in seg.planes)  # found as a plane
+    assert (seg.labels[len(points) :] == 0).all()
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()

@@ -1,30 +1,60 @@
-"""Regrowth: a cut-away part regrows up to r2 from the centroid; ties go to the nearer cluster."""
+"""Regrowth: holes refill inside an object's box, nothing grows outside it, ties go nearer."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from helpers_refine import grid_patch
 
 from process.refine.regrowth import regrow
 
 
-def test_a_cut_away_part_regrows_and_a_point_beyond_r2_does_not() -> None:
-    body = grid_patch((0.0, 0.8), (0.0, 0.4))  # cluster 1: centroid (0.39, 0.19), r2 ~ 0.44
-    strip = grid_patch((0.8, 1.3), (0.0, 0.4))  # the cut-away part, label 0, chained at 2 cm
-    points = np.concatenate([body, strip])
-    labels = np.r_[np.full(len(body), 4), np.zeros(len(strip))].astype(np.uint8)
-    clusters = np.r_[np.ones(len(body)), np.zeros(len(strip))].astype(np.int32)
-    grown = regrow(points, labels, clusters, r1_m={4: 0.025})
-    centroid = body.astype(np.float64).mean(axis=0)
-    r2 = np.linalg.norm(body.max(axis=0) - body.min(axis=0)) / 2
-    assert abs(grown.r2_m[1] - r2) < 1e-5
-    inside = np.linalg.norm(strip - centroid, axis=1) <= r2
-    assert 0 < inside.sum() < len(strip)  # the test reaches past r2
-    strip_labels = grown.labels[len(body) :]
-    assert (strip_labels[inside] == 4).all()
-    assert (strip_labels[~inside] == 0).all()
-    assert (grown.clusters[len(body) :][inside] == 1).all()
-    assert len(grown.regrown) == inside.sum()
+def _box_surface(low: tuple[float, float, float], high: tuple[float, float, float]) -> np.ndarray:
+    """Return the top and four sides of an axis-aligned box on a 2 cm grid."""
+    (x0, y0, z0), (x1, y1, z1) = low, high
+    top = grid_patch((x0, x1), (y0, y1), z=z1)
+    sides = []
+    for y in (y0, y1 - 0.02):
+        side = grid_patch((x0, x1), (z0, z1))[:, [0, 2, 1]]
+        side[:, 1] = y
+        sides.append(side)
+    for x in (x0, x1 - 0.02):
+        side = grid_patch((y0, y1), (z0, z1))[:, [2, 0, 1]]
+        side[:, 0] = x
+        sides.append(side)
+    return np.concatenate([top, *sides])
+
+
+def test_a_missed_patch_inside_a_known_box_is_refilled_and_nothing_outside_it_grows() -> None:
+    box = _box_surface((0.0, 0.0, 0.0), (1.2, 0.6, 0.7))  # a table-like box
+    hole = np.linalg.norm(box[:, :2] - (0.6, 0.3), axis=1) < 0.2  # 40 cm missed on the top
+    hole &= box[:, 2] > 0.69
+    # unlabelled neighbour 4 cm beside the box (a bin): within r1 of the box, outside its extent
+    beside = grid_patch((1.24, 1.5), (0.0, 0.6), z=0.5)
+    points = np.concatenate([box, beside])
+    labels = np.r_[np.where(hole, 0, 4), np.zeros(len(beside))].astype(np.uint8)
+    clusters = np.r_[np.where(hole, 0, 1), np.zeros(len(beside))].astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.05})
+    assert hole.sum() > 250
+    assert (grown.labels[: len(box)] == 4).all()  # the whole hole came back, in waves
+    assert grown.waves >= 3
+    assert (grown.labels[len(box) :] == 0).all()  # r1 reaches it, but it is not in the table
+    assert grown.r2_m[1] == pytest.approx(np.linalg.norm(box.max(0) - box.min(0)) / 2, abs=1e-5)
+
+
+def test_pieces_of_one_object_share_its_box_and_r2() -> None:
+    left = grid_patch((0.0, 0.5), (0.0, 0.6))  # a table top split by a missed strip
+    right = grid_patch((0.7, 1.2), (0.0, 0.6))
+    strip = grid_patch((0.5, 0.7), (0.0, 0.6))
+    points = np.concatenate([left, right, strip])
+    labels = np.r_[np.full(len(left) + len(right), 4), np.zeros(len(strip))].astype(np.uint8)
+    clusters = np.r_[np.full(len(left), 1), np.full(len(right), 2), np.zeros(len(strip))]
+    grown = regrow(points, labels, clusters.astype(np.int32), r1_m={4: 0.03}, gap_m=0.25)
+    assert grown.objects[1] == grown.objects[2]
+    assert grown.r2_m[1] == grown.r2_m[2] == pytest.approx(np.hypot(1.18, 0.58) / 2, abs=1e-5)
+    assert (grown.labels[-len(strip) :] == 4).all()
+    apart = regrow(points, labels, clusters.astype(np.int32), r1_m={4: 0.03}, gap_m=0.1)
+    assert apart.objects[1] != apart.objects[2]  # 20 cm apart: two objects
 
 
 def test_a_gap_wider_than_r1_stops_the_growth() -> None:
