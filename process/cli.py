@@ -153,54 +153,109 @@ def _run(
 
     from process import outputs
     from process.config import load_config, resolve_stages
-    from process.pipeline import ReplayPipeline
-    from viz.logger import NullLogger
-    from viz.rerun_log import RerunLogger
+    from process.job import run_recording
 
     cfg = load_config(config)
     stage_list = resolve_stages(stages)
-    with outputs.staged(out, force=force) as staging:
-        rrd = staging / outputs.RRD
-        viz = (
-            NullLogger()
-            if no_viz
-            else RerunLogger(
-                rrd, recording_name=recording.stem, live=live, **cfg.viz.logger_options()
-            )
-        )
+    stop = threading.Event()
+
+    def started() -> None:  # the log's sinks are open: say so, then take over the signals
         if live is not None:
             typer.echo(f"streaming the log to a viewer at {live.url}", err=True)
-        stop = threading.Event()
-        pipeline = ReplayPipeline(
-            recording,
-            out_dir=staging,
-            cfg=cfg,
-            stages=stage_list,
-            viz=viz,
-            weights=weights,
-            device=device,
-            follow_idle_s=follow_idle_s,
-            stop=stop,
-        )
         signal.signal(signal.SIGTERM, _interrupt)
         if follow_idle_s is not None:
             signal.signal(signal.SIGINT, _stop_following(stop))
             typer.echo(f"following {recording}: frames are processed as they are written", err=True)
-        try:
-            result = pipeline.run()
-            outputs.close_logger(viz, quiet=False)
-        except BaseException as err:
-            outputs.close_logger(viz, quiet=True)  # the staging folder goes, whatever is in it
-            if isinstance(err, KeyboardInterrupt):
-                _fail(f"interrupted; no output was written and {out} is as it was")
-            raise
-        written = result.written + ([] if no_viz else [rrd])
-        result.written = outputs.commit(staging, out, written)
+
+    result = run_recording(
+        recording,
+        out,
+        cfg=cfg,
+        stages=stage_list,
+        weights=weights,
+        device=device,
+        no_viz=no_viz,
+        live=live,
+        follow_idle_s=follow_idle_s,
+        stop=stop,
+        force=force,
+        on_start=started,
+    )
     console = Console(stderr=False)
     console.print(outputs.summary_table(result.metrics))
     console.print(f"outputs in {out}: " + ", ".join(sorted(p.name for p in result.written)))
     if not no_viz:
         console.print(f"view: semreplay-view {out / outputs.RRD}")
+
+
+_EXAMPLES_BATCH = """
+Examples:
+
+  semreplay-process batch recordings/ --out runs
+
+  semreplay-process batch 'site_*/*.mcap' --out runs --jobs 2 --stages odometry
+
+  semreplay-process batch /shared/recs --out /shared/runs --executor ray --address auto
+"""
+
+
+@app.command(epilog=_EXAMPLES_BATCH)
+def batch(
+    recordings: Annotated[
+        list[str], typer.Argument(help="recordings (.mcap), folders of them, or globs")
+    ],
+    out: Annotated[Path, typer.Option("--out", help="output folder: OUT/<name>/ per recording")],
+    config: Annotated[Path | None, typer.Option(help="TOML config overriding the defaults")] = None,
+    jobs: Annotated[
+        int | None,
+        typer.Option(help="local tasks at once (default: one per core, as memory allows)"),
+    ] = None,
+    executor: Annotated[str, typer.Option(help="local | ray")] = "local",
+    address: Annotated[
+        str | None,
+        typer.Option(
+            help="Ray cluster address, e.g. auto (default: a running one, else a local one)"
+        ),
+    ] = None,
+    stages: Annotated[str, typer.Option(help="as for run")] = "refinement",
+    weights: Annotated[Path | None, typer.Option(help="segmentation checkpoint")] = None,
+    device: Annotated[str, typer.Option(help="auto | cpu | cuda")] = "auto",
+    no_viz: Annotated[bool, typer.Option("--no-viz", help="do not write recording.rrd")] = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
+) -> None:
+    """Process many recordings, one task each, as `run` would; summarise them in OUT/summary.*."""
+    from capture.errors import CaptureError
+    from process.errors import ReplayError
+
+    _setup_logging(verbose)
+    if device not in ("auto", "cpu", "cuda"):
+        raise typer.BadParameter(f"{device!r}; valid: auto, cpu, cuda", param_hint="--device")
+    try:
+        from process.batch.runner import run_batch
+        from process.config import load_config, resolve_stages
+
+        signal.signal(signal.SIGTERM, _interrupt)
+        rows = run_batch(
+            recordings,
+            out,
+            cfg=load_config(config),
+            stages=resolve_stages(stages),
+            weights=weights,
+            device=device,
+            no_viz=no_viz,
+            jobs=jobs,
+            executor=executor,
+            address=address,
+        )
+    except (ReplayError, CaptureError) as err:
+        _fail(str(err))
+    failed = [r["name"] for r in rows if r["status"] != "ok"]
+    typer.echo(f"summary: {out / 'summary.html'} (and summary.csv, summary.parquet)")
+    if failed:
+        _fail(
+            f"{len(failed)} of {len(rows)} recordings failed ({', '.join(failed)}): the reasons"
+            f" are in {out / 'summary.csv'}; rerun the same command to retry them"
+        )
 
 
 @app.command(

@@ -56,6 +56,30 @@ class VizConfig:
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
+class BatchConfig:
+    """What each task of `semreplay-process batch` asks of a Ray cluster (one recording a task)."""
+
+    cpus_per_task: float = 1.0
+    # > 0 puts tasks on GPU nodes only; segmentation then runs there (--device auto).
+    gpus_per_task: float = 0.0
+    # Ray schedules no more tasks on a node than its memory holds; the local default of --jobs
+    # divides this machine's available memory by it too (10 simulated minutes peaked at 1.47 GB).
+    memory_gb_per_task: float = 1.5
+    # Times Ray runs a task again after its worker process or node was lost.
+    max_retries: int = 2
+
+    def __post_init__(self) -> None:
+        if self.cpus_per_task <= 0 or self.gpus_per_task < 0 or self.memory_gb_per_task <= 0:
+            raise ConfigError(
+                "batch.cpus_per_task and batch.memory_gb_per_task must be > 0 and"
+                f" batch.gpus_per_task >= 0, got {self.cpus_per_task}, {self.memory_gb_per_task},"
+                f" {self.gpus_per_task}"
+            )
+        if self.max_retries < 0:
+            raise ConfigError(f"batch.max_retries must be >= 0, got {self.max_retries}")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
 class ReplayConfig:
     """Every setting of `semreplay-process`, one section per stage."""
 
@@ -65,6 +89,7 @@ class ReplayConfig:
     fusion: FusionConfig = dataclasses.field(default_factory=FusionConfig)
     refine: RefineConfig = dataclasses.field(default_factory=RefineConfig)
     viz: VizConfig = dataclasses.field(default_factory=VizConfig)
+    batch: BatchConfig = dataclasses.field(default_factory=BatchConfig)
 
 
 def load_config(path: Path | None) -> ReplayConfig:

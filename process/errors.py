@@ -25,3 +25,7 @@ class StageError(ReplayError):
 
 class OutputError(ReplayError):
     """An output file cannot be written (no space, no permission, not a folder)."""
+
+
+class RunInterruptedError(ReplayError):
+    """Ctrl-C (or SIGTERM) stopped a run; the message says which complete files it left."""
