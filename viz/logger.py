@@ -9,7 +9,7 @@ values or capture types, never `process` objects. Each method's body is the do-n
 from __future__ import annotations
 
 from collections.abc import Mapping
-from types import TracebackType
+from dataclasses import dataclass
 from typing import Literal, Protocol, Self
 
 import numpy as np
@@ -24,18 +24,24 @@ FloatArray = npt.NDArray[np.floating]
 IntArray = npt.NDArray[np.integer]
 
 
+@dataclass(frozen=True, slots=True)
+class DbscanCurves:
+    """One class's adaptive-DBSCAN curves over K (paper Figs. 4-5) and the K that was chosen."""
+
+    ks: IntArray  # (K,)
+    eps_m: FloatArray  # (K,)
+    min_pts: FloatArray  # (K,)
+    n_clusters: IntArray  # (K,)
+    chosen_k: int
+
+
 class Logger(Protocol):
     """What the pipeline and the refinement log, one method per domain object."""
 
     def __enter__(self) -> Self:
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def set_frame(self, index: int, *, stamp_ns: int) -> None:
@@ -116,16 +122,7 @@ class Logger(Protocol):
         """Log the points of one refinement step, coloured by cluster where given."""
         return None
 
-    def log_dbscan_curves(
-        self,
-        label_name: str,
-        *,
-        ks: IntArray,
-        eps_m: FloatArray,
-        min_pts: FloatArray,
-        n_clusters: IntArray,
-        chosen_k: int,
-    ) -> None:
+    def log_dbscan_curves(self, label_name: str, *, curves: DbscanCurves) -> None:
         """Log the adaptive-DBSCAN curves over K of one class and mark the chosen K."""
         return None
 

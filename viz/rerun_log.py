@@ -19,6 +19,7 @@ import rerun as rr
 from capture.recording import Intrinsics, RgbdFrame
 from viz import layout, rerun_arrays
 from viz.logger import (
+    DbscanCurves,
     FloatArray,
     IntArray,
     MapKind,
@@ -259,19 +260,11 @@ class RerunLogger(NullLogger):
         colors = None if clusters is None else _PALETTE[np.asarray(clusters) % len(_PALETTE)]
         self._rec.log(path, rr.Points3D(xyz, class_ids=labels, colors=colors, radii=_POINT_RADIUS))
 
-    def log_dbscan_curves(
-        self,
-        label_name: str,
-        *,
-        ks: IntArray,
-        eps_m: FloatArray,
-        min_pts: FloatArray,
-        n_clusters: IntArray,
-        chosen_k: int,
-    ) -> None:
+    def log_dbscan_curves(self, label_name: str, *, curves: DbscanCurves) -> None:
         """Log eps, MinPts and cluster count over K (timeline `dbscan_k`) and mark the chosen K."""
-        curves = {"eps_m": eps_m, "min_pts": min_pts, "n_clusters": n_clusters}
-        k, values, chosen = rerun_arrays.curves_over_k(ks, curves, chosen_k=chosen_k)
+        chosen_k = curves.chosen_k
+        named = {"eps_m": curves.eps_m, "min_pts": curves.min_pts, "n_clusters": curves.n_clusters}
+        k, values, chosen = rerun_arrays.curves_over_k(curves.ks, named, chosen_k=chosen_k)
         color = rerun_arrays.label_color(label_name)
         for name, v in values.items():
             path = layout.dbscan_path(name, label_name)

@@ -11,7 +11,7 @@ import numpy as np
 from capture.recording import LABEL_NAMES
 from process.refine.steps import ClassClustering, RefineResult
 from viz.layout import STAGE_DBSCAN, STAGE_FINAL, STAGE_PLANES, STAGE_REGROWTH, STAGE_SOR
-from viz.logger import Logger
+from viz.logger import DbscanCurves, Logger
 
 
 def log_steps(result: RefineResult, viz: Logger) -> None:
@@ -55,14 +55,14 @@ def _log_curves(entry: ClassClustering, viz: Logger) -> None:
     if entry.choice.rule == "plateau" and entry.curves.n_big is not None:
         counts = entry.curves.n_big
     ran = counts >= 0
-    viz.log_dbscan_curves(
-        name,
+    curves = DbscanCurves(
         ks=entry.curves.ks[ran],
         eps_m=entry.curves.eps_m[ran],
         min_pts=entry.curves.min_pts[ran].astype(np.float64),
         n_clusters=counts[ran],
         chosen_k=entry.choice.k,
     )
+    viz.log_dbscan_curves(name, curves=curves)
     level = "INFO" if entry.choice.stable else "WARN"
     choice = entry.choice
     viz.log_text(

@@ -14,7 +14,7 @@ from helpers_viz import RrdContents, assert_rrd_verifies, read_rrd, rerun_verify
 
 from capture.recording import LABEL_NAMES, RecordingReader
 from viz import layout
-from viz.logger import Logger, NullLogger
+from viz.logger import DbscanCurves, Logger, NullLogger
 from viz.rerun_log import RerunLogger
 
 STAMPS_NS = [1_000_000_000 + i * 33_333_333 for i in range(5)]  # those of the `recording` fixture
@@ -276,14 +276,8 @@ def test_dbscan_curves_lie_on_the_k_timeline_only_with_the_chosen_k_marked(tmp_p
     n_clusters = np.array([6, 4, 3, 3, 3, 2, 2, 1, 1, 1])
     with RerunLogger(tmp_path / "d.rrd", recording_name="d") as log:
         log.set_stage(layout.STAGE_DBSCAN)
-        log.log_dbscan_curves(
-            "tv monitor",
-            ks=ks,
-            eps_m=ks * 0.01,
-            min_pts=ks + 4.0,
-            n_clusters=n_clusters,
-            chosen_k=5,
-        )
+        curves = DbscanCurves(ks, ks * 0.01, ks + 4.0, n_clusters, chosen_k=5)
+        log.log_dbscan_curves("tv monitor", curves=curves)
     contents = read_rrd(tmp_path / "d.rrd")
     for curve, expected in (
         ("eps_m", ks * 0.01),
@@ -324,11 +318,9 @@ def test_metrics_are_one_scalar_per_name(tmp_path: Path) -> None:
         (
             lambda log: log.log_dbscan_curves(
                 "chair",
-                ks=[1, 2, 3],
-                eps_m=[1, 2, 3],
-                min_pts=[4, 4, 4],
-                n_clusters=[1, 1, 1],
-                chosen_k=9,
+                curves=DbscanCurves(
+                    np.arange(1, 4), np.ones(3), np.full(3, 4.0), np.ones(3, int), chosen_k=9
+                ),
             ),
             "chosen_k",
         ),

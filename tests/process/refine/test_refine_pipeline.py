@@ -132,8 +132,9 @@ def test_refine_and_log_logs_every_step_in_stage_order(office: SyntheticScene) -
     curves = [c for c in viz.calls if c[0] == "log_dbscan_curves"]
     assert {c[1] for c in curves} == {e for e in section["dbscan"]}
     for _, _, kwargs in curves:
-        assert kwargs["chosen_k"] in kwargs["ks"]
-        assert len(kwargs["ks"]) == len(kwargs["eps_m"]) == len(kwargs["n_clusters"])
+        drawn = kwargs["curves"]
+        assert drawn.chosen_k in drawn.ks
+        assert len(drawn.ks) == len(drawn.eps_m) == len(drawn.n_clusters)
     assert ("log_map", "refined") in [c[:2] for c in viz.calls]
     assert len(refined) == section["points"]["final"]
     assert section["phases"]["III"]["all"]["f1"] > 0.9
