@@ -22,6 +22,7 @@ from typing import Any, Final
 from rich.table import Table
 
 from process.errors import OutputError
+from viz.logger import Logger
 
 logger = logging.getLogger(__name__)
 
@@ -171,7 +172,7 @@ def commit(staging: Path, out: Path, written: list[Path]) -> list[Path]:
     return final
 
 
-def close_logger(viz: Any, *, quiet: bool) -> None:
+def close_logger(viz: Logger, *, quiet: bool) -> None:
     """Close the .rrd logger; a failure (full disk) is an OutputError, or only logged if quiet."""
     try:
         viz.close()
