@@ -31,7 +31,8 @@ from torch.utils.flop_counter import FlopCounterMode
 from benchmarks import seg_models
 from benchmarks.common import Row
 from capture.recording import RecordingReader
-from process.segmentation import SegmentationConfig, Segmenter, confusion_matrix, mean_iou
+from process.evaluate import confusion_matrix, confusion_miou
+from process.segmentation import SegmentationConfig, Segmenter
 from process.segmentation.deeplab import build_model
 from process.segmentation.weights import (
     SAMPLES_CHECKPOINT,
@@ -94,7 +95,7 @@ def _unseen_miou(weights: Path) -> float | None:
                     gt = frame.ground_truth
                     if gt is not None and gt.labels is not None:
                         conf += confusion_matrix(seg.segment(frame.color).labels, gt.labels)
-    return mean_iou(conf)
+    return confusion_miou(conf)
 
 
 def _latency_rows(image: npt.NDArray[np.uint8]) -> list[Row]:

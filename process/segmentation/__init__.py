@@ -9,7 +9,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from process.segmentation.config import BACKENDS, DEVICES, Segmentation, SegmentationConfig
-from process.segmentation.metrics import confusion_matrix, iou_per_label, mean_iou
 
 if TYPE_CHECKING:
     from process.segmentation.segmenter import Segmenter
@@ -23,9 +22,6 @@ __all__ = [
     "Segmenter",
     "TrainConfig",
     "TrainResult",
-    "confusion_matrix",
-    "iou_per_label",
-    "mean_iou",
     "train",
 ]
 

@@ -14,9 +14,10 @@ import torch
 
 from capture.recording import NUM_LABELS, RecordingError, RecordingReader
 from process.errors import StageError
-from process.segmentation.metrics import IGNORE
 
 logger = logging.getLogger(__name__)
+
+IGNORE: int = 255  # label value excluded from training and evaluation
 
 
 @dataclass(frozen=True)

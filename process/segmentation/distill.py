@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from process.errors import ConfigError
 from process.segmentation.config import SegmentationConfig
-from process.segmentation.metrics import IGNORE
+from process.segmentation.dataset import IGNORE
 from process.segmentation.models import SHIPPED, shipped
 
 TEACHERS: Final = tuple(name for name in SHIPPED if name != "simulator")

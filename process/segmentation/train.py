@@ -14,7 +14,9 @@ from torch import nn
 from tqdm import tqdm
 
 from process.errors import ConfigError
+from process.evaluate import confusion_iou, confusion_miou
 from process.segmentation.dataset import (
+    IGNORE,
     LabelledImages,
     augment_pair,
     class_weights,
@@ -23,7 +25,6 @@ from process.segmentation.dataset import (
 )
 from process.segmentation.deeplab import PRESETS, DeepLab, build_model
 from process.segmentation.distill import make_teacher
-from process.segmentation.metrics import IGNORE, iou_per_label, mean_iou
 from process.segmentation.validation import (
     evaluate,
     normalise,
@@ -162,7 +163,9 @@ def train(
         stats = EpochStats(epoch, loss, time.perf_counter() - t0)
         if val_data is not None:
             conf = evaluate(model, val_data, batch_size=cfg.batch_size)
-            stats = EpochStats(epoch, loss, stats.seconds, mean_iou(conf), iou_per_label(conf))
+            stats = EpochStats(
+                epoch, loss, stats.seconds, confusion_miou(conf), confusion_iou(conf)
+            )
         history.append(stats)
         logger.info(
             "epoch %d: loss %.4f, val mIoU %s, %.0f s", epoch, loss, stats.val_miou, stats.seconds

@@ -7,9 +7,9 @@ import numpy.typing as npt
 import torch
 from torch import nn
 
+from process.evaluate import confusion_matrix
 from process.segmentation.dataset import LabelledImages
 from process.segmentation.deeplab import DeepLab
-from process.segmentation.metrics import confusion_matrix
 from process.segmentation.weights import IMAGENET_MEAN, IMAGENET_STD
 
 
@@ -71,5 +71,5 @@ def evaluate(model: DeepLab, data: LabelledImages, *, batch_size: int = 8) -> np
     with torch.inference_mode():
         for start in range(0, len(data), batch_size):
             pred = model(to_batch(data.colors[start : start + batch_size])).argmax(dim=1).numpy()
-            conf += confusion_matrix(pred, data.labels[start : start + batch_size], num_labels=n)
+            conf += confusion_matrix(pred, data.labels[start : start + batch_size], n_labels=n)
     return conf

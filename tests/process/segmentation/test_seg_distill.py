@@ -9,9 +9,8 @@ import numpy.typing as npt
 import pytest
 
 from process.errors import ConfigError, StageError
-from process.segmentation.dataset import load_labelled
+from process.segmentation.dataset import IGNORE, load_labelled
 from process.segmentation.distill import make_teacher
-from process.segmentation.metrics import IGNORE
 
 
 def _left_table_right_unsure(color: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:

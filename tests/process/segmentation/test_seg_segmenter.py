@@ -13,8 +13,8 @@ from helpers_seg import fake_torchvision_state, random_checkpoint, write_random_
 
 from capture.recording import VOC_TO_LABEL, RecordingReader
 from process.errors import ConfigError, ModelError, StageError
+from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.segmentation import Segmentation, SegmentationConfig, Segmenter
-from process.segmentation.metrics import confusion_matrix, iou_per_label, mean_iou
 from process.segmentation.weights import label_matrix, save_checkpoint
 
 VOC_CHAIR, VOC_BIRD, VOC_DOG = 9, 3, 12
@@ -139,7 +139,7 @@ def test_tflite_voc_model_segments_the_dog_photo(shared_data: Path, model: str) 
     trimap = cv2.imread(str(folder / "dog_segmentation_mask_256.bmp"), cv2.IMREAD_GRAYSCALE)
     seg = Segmenter(cfg).segment(image)
     gt = np.where(trimap == 2, 255, np.where(trimap == 0, VOC_TO_LABEL[VOC_DOG], 0))
-    ious = iou_per_label(confusion_matrix(seg.labels, gt), classes=range(11))
+    ious = confusion_iou(confusion_matrix(seg.labels, gt), classes=range(11))
     assert ious[10] > 0.9  # the dog (VOC 12 -> clutter)
     assert ious[0] > 0.85
     assert 0.5 < float(seg.confidence.mean()) <= 1.0
@@ -164,7 +164,7 @@ def test_tflite_voc_model_segments_the_bird_photo(shared_data: Path, model: str)
     seg = Segmenter(cfg).segment(image)
     gt = np.zeros(seg.labels.shape, np.uint8)
     cv2.fillPoly(gt, [np.array(BIRD_OUTLINE, np.int32)], VOC_TO_LABEL[VOC_BIRD])
-    ious = iou_per_label(confusion_matrix(seg.labels, gt), classes=range(11))
+    ious = confusion_iou(confusion_matrix(seg.labels, gt), classes=range(11))
     assert ious[10] > 0.7  # the bird (VOC 3 -> clutter)
     assert set(np.unique(seg.labels)) <= {0, 10}
 
@@ -182,7 +182,7 @@ def test_shipped_checkpoint_segments_an_unseen_simulated_room(sim_recording: Pat
             ):
                 conf += confusion_matrix(seg.segment(frame.color).labels, frame.ground_truth.labels)
     assert conf.sum() == 3 * 640 * 480
-    assert mean_iou(conf) > 0.7
+    assert confusion_miou(conf) > 0.7
     assert np.trace(conf) / conf.sum() > 0.9
 
 

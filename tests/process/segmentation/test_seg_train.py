@@ -8,8 +8,10 @@ import torch
 from helpers_seg import SCENE_COLORS, synthetic_scene, write_labelled_recording
 
 from process.errors import ConfigError, StageError
+from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.segmentation import SegmentationConfig, Segmenter
 from process.segmentation.dataset import (
+    IGNORE,
     LabelledImages,
     augment_pair,
     class_weights,
@@ -17,7 +19,6 @@ from process.segmentation.dataset import (
     load_labelled,
 )
 from process.segmentation.deeplab import build_model
-from process.segmentation.metrics import IGNORE, confusion_matrix, iou_per_label, mean_iou
 from process.segmentation.train import EpochStats, TrainConfig, train
 from process.segmentation.validation import normalise, recalibrate_batchnorm
 from process.segmentation.weights import load_checkpoint
@@ -31,20 +32,20 @@ TINY = TrainConfig(
 def test_iou_matches_a_hand_computed_example() -> None:
     gt = np.array([[0, 0, 1, 1], [0, 0, 1, 1], [2, 2, 2, IGNORE]])
     pred = np.array([[0, 1, 1, 1], [0, 0, 1, 2], [2, 2, 0, 0]])
-    conf = confusion_matrix(pred, gt, num_labels=3)
+    conf = confusion_matrix(pred, gt, n_labels=3)
     # TP / (TP + FP + FN): label 0: 3/(3+1+1); label 1: 3/(3+1+1); label 2: 2/(2+1+1)
-    assert iou_per_label(conf, classes=range(3)) == pytest.approx({0: 0.6, 1: 0.6, 2: 0.5})
-    assert mean_iou(conf, classes=range(3)) == pytest.approx(1.7 / 3)
+    assert confusion_iou(conf, classes=range(3)) == pytest.approx({0: 0.6, 1: 0.6, 2: 0.5})
+    assert confusion_miou(conf, classes=range(3)) == pytest.approx(1.7 / 3)
     # By default 0 (unlabelled) is not a class: the mean is over labels 1-10.
-    assert mean_iou(conf) == pytest.approx(1.1 / 2)
+    assert confusion_miou(conf) == pytest.approx(1.1 / 2)
 
 
 def test_metrics_count_labels_in_prediction_or_truth() -> None:
     # One definition everywhere (process.evaluate): a label only predicted counts, with IoU 0.
     conf = confusion_matrix(np.array([0, 5, 4]), np.array([0, 0, 4]))
-    assert iou_per_label(conf) == {4: 1.0, 5: 0.0}
-    assert iou_per_label(conf, classes=range(11)) == {0: 0.5, 4: 1.0, 5: 0.0}
-    assert mean_iou(conf) == pytest.approx(0.5)
+    assert confusion_iou(conf) == {4: 1.0, 5: 0.0}
+    assert confusion_iou(conf, classes=range(11)) == {0: 0.5, 4: 1.0, 5: 0.0}
+    assert confusion_miou(conf) == pytest.approx(0.5)
 
 
 def test_augmentation_moves_colour_and_labels_together() -> None:
