@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import Row, best_of
+from benchmarks.common import Row, best_of, run_with_peak_rss
 from benchmarks.synthetic_office import SyntheticScene, indoor_scene
 from capture.recording import LABEL_NAMES
 from process.cloud import LabelledCloud, read_cloud, write_ply
@@ -37,6 +37,7 @@ def run() -> list[Row]:
     rows += _method_rows(scene)
     rows += _k_loop_rows(scene)
     rows += _pcl_rows()
+    rows += _scale_rows()
     return rows
 
 
@@ -184,3 +185,29 @@ def _pcl_rows() -> list[Row]:
                 reference_planes, source, higher_is_better=True),
         ]  # fmt: skip
     return rows
+
+
+def _scale_rows(n: int = 5_000_000) -> list[Row]:
+    """The `refine` command on a generated 5M-point one-class cloud: seconds and peak RSS.
+
+    200 solid 0.8 m blobs of one class: a volume, the worst case for voxel cells (3 cm voxels
+    barely thin it), so SOR and DBSCAN run on coarser voxels (RefineConfig.max_cells).
+    """
+    rng = np.random.default_rng(1)
+    centers = rng.uniform(0, 20, (200, 3))
+    points = centers[rng.integers(0, 200, n)] + rng.uniform(-0.4, 0.4, (n, 3))
+    cloud = LabelledCloud(
+        points.astype(np.float32), np.full((n, 3), 128, np.uint8), np.full(n, 5, np.uint8)
+    )
+    del points
+    with tempfile.TemporaryDirectory() as tmp:
+        path, out = Path(tmp) / "big.ply", Path(tmp) / "out"
+        write_ply(path, cloud)
+        del cloud
+        child = run_with_peak_rss("process", "refine", str(path), "--out", str(out))
+    label = f"refine command, generated {n:,}-pt one-class cloud"
+    source = "issue 16 item 6 goal"
+    return [
+        Row(AREA, label, "s", child.seconds, 60.0, source, goal="< 60 s"),
+        Row(AREA, f"{label}: peak RSS", "GB", child.peak_gb, 3.0, source, goal="< 3 GB"),
+    ]

@@ -34,6 +34,8 @@ class RefineConfig:
     dbscan_method: int = 2  # 1: one (eps, MinPts) for all classes; 2: one per class (paper)
     k_max: int = 30  # largest K of the KANN eps_K candidates
     cluster_voxel_m: float = 0.03  # DBSCAN runs on the centroids of voxels this size; 0 = points
+    max_cells: int = 400_000  # SOR and each class's DBSCAN run on at most this many points or
+    # voxel centroids; past it the voxels grow (multi-million-point clouds), labels carried back
     dbscan_rule: str = "plateau"  # K choice: "plateau" (selection.py) or "literal" (PAPER.md)
     plateau_tolerance: float = 0.25  # "plateau": large-cluster counts may vary by this share
     min_cluster_points: int = 30  # clusters smaller than this go back to label 0 ...
@@ -63,6 +65,7 @@ class RefineConfig:
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
+            "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),
             "seed": (self.seed, 0, 2**31 - 1),
         }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -20,6 +21,8 @@ from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
 
 logger = logging.getLogger(__name__)
+
+_MIN_VOXEL_M = 0.005  # capped_cells starts here when asked for points (voxel 0)
 
 
 @dataclass(frozen=True)
@@ -114,9 +117,7 @@ def refine(
     planes = segment_planes(cloud.points, cfg, up=up)
     lap("planes")
     objects = np.flatnonzero(~planes.structural)
-    keep = sor_inliers(
-        cloud.points[objects], nb_neighbors=cfg.sor_nb_neighbors, std_ratio=cfg.sor_std_ratio
-    )
+    keep = _sor(cloud.points[objects], cfg)
     outliers, objects = objects[~keep], objects[keep]
     lap("sor")
     points = cloud.points[objects]
@@ -154,7 +155,11 @@ def _correct(
     next_id = 1
     for label in (int(c) for c in np.unique(labels) if c > 0):
         members = np.flatnonzero(labels == label)
-        cells, cell_of = voxel_cells(points[members], cfg.cluster_voxel_m)
+        cells, cell_of, voxel_m = capped_cells(points[members], cfg.cluster_voxel_m, cfg.max_cells)
+        if voxel_m != cfg.cluster_voxel_m:
+            logger.info(
+                "class %d: %d points, DBSCAN on %.3f m voxels", label, len(members), voxel_m
+            )
         entry, cluster_of = _cluster_class(label, cells, cfg, shared)
         sizes = np.bincount(cluster_of[cluster_of >= 0], minlength=1)
         min_size = cfg.min_cluster_points if entry.choice is None else entry.choice.min_size
@@ -178,15 +183,60 @@ def voxel_cells(
 
     Adaptive DBSCAN runs on these cells: K = 1..K_max then spans the same distances in metres
     at any density (at 7 mm spacing, K = 30 reaches only ~3 cm and splits every object along
-    each missed stripe), and a million-point class costs what a 2 cm map costs.
+    each missed stripe), and a million-point class costs what a 2 cm map costs. Cells come in
+    the lexicographic order of their (x, y, z) voxel indices.
     """
     if voxel_m <= 0 or len(points) == 0:
         return points, np.arange(len(points))
     keys = np.floor(points / np.float32(voxel_m)).astype(np.int64)
-    _, cell_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    if float(np.prod(span.astype(np.float64))) < 2.0**62:
+        # one int64 per point, in the same order as the rows: a 1-D sort, not a row sort
+        packed = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+        del keys
+        _, cell_of, counts = np.unique(packed, return_inverse=True, return_counts=True)
+    else:
+        _, cell_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     cell_of = cell_of.reshape(-1)
     sums = np.stack([np.bincount(cell_of, points[:, a], len(counts)) for a in range(3)], 1)
     return (sums / counts[:, None]).astype(np.float32), cell_of
+
+
+def capped_cells(
+    points: npt.NDArray[np.float32], voxel_m: float, max_cells: int
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.intp], float]:
+    """Return voxel_cells at `voxel_m`, or at the smallest coarser voxel giving <= max_cells.
+
+    The voxel grows only when the cells outnumber `max_cells` (a multi-million-point cloud,
+    or a volume rather than a surface): the steps on the cells then cost what `max_cells`
+    points cost, at any size of cloud, and every point takes its cell's result.
+    Returns the cells, each point's cell and the voxel used.
+    """
+    cells, cell_of = voxel_cells(points, voxel_m)
+    while len(cells) > max_cells:
+        # cells fall with the square of the voxel on surfaces, faster in volumes
+        voxel_m = max(voxel_m, _MIN_VOXEL_M) * max(1.1, math.sqrt(len(cells) / max_cells))
+        cells, cell_of = voxel_cells(points, voxel_m)
+    return cells, cell_of, voxel_m
+
+
+def _sor(points: npt.NDArray[np.float32], cfg: RefineConfig) -> npt.NDArray[np.bool_]:
+    """Return SOR's keep mask: on the points, or on voxel centroids past cfg.max_cells points.
+
+    Past `max_cells` points, SOR runs on the centroids of the finest voxels (from a third of
+    the clustering voxel up) that number at most `max_cells`: a stray point is alone in its
+    voxel and far from the others, as before, and every point takes its voxel's verdict.
+    """
+    n, ratio = cfg.sor_nb_neighbors, cfg.sor_std_ratio
+    if len(points) <= cfg.max_cells:
+        return sor_inliers(points, nb_neighbors=n, std_ratio=ratio)
+    cells, cell_of, voxel_m = capped_cells(points, cfg.cluster_voxel_m / 3, cfg.max_cells)
+    logger.info(
+        "SOR on %d centroids of %.3f m voxels (%d points)", len(cells), voxel_m, len(points)
+    )
+    keep: npt.NDArray[np.bool_] = sor_inliers(cells, nb_neighbors=n, std_ratio=ratio)[cell_of]
+    return keep
 
 
 def _cluster_class(
@@ -219,7 +269,7 @@ def _shared_estimate(
     points: npt.NDArray[np.float32], labels: npt.NDArray[np.uint8], cfg: RefineConfig
 ) -> ClassClustering:
     """Return method 1's single (eps, MinPts), estimated over every labelled object point."""
-    labelled = voxel_cells(points[labels > 0], cfg.cluster_voxel_m)[0]
+    labelled = capped_cells(points[labels > 0], cfg.cluster_voxel_m, cfg.max_cells)[0]
     t0 = time.perf_counter()
     if len(labelled) < 2:
         return ClassClustering(0, len(labelled), None, None, 0, 0, 0.0, 0.0)

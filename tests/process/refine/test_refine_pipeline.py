@@ -39,6 +39,19 @@ def test_f1_over_target_classes_rises_from_phase_i_to_iii(office: SyntheticScene
         assert entry.curves.eps_m[entry.choice.k - 1] == entry.choice.eps_m
 
 
+def test_capped_cells_carry_sor_and_dbscan_back_to_every_point(office: SyntheticScene) -> None:
+    direct = refine(office.cloud, RefineConfig(), up=UP)
+    capped = refine(office.cloud, RefineConfig(max_cells=5000), up=UP)  # coarser voxels
+    assert len(capped.labels_iii) == len(office.cloud)
+    f1 = {
+        name: label_metrics(r.labels_iii, office.truth)["all"]["f1"]
+        for name, r in (("direct", direct), ("capped", capped))
+    }
+    assert f1["capped"] > f1["direct"] - 0.1
+    agree = float(np.mean(capped.labels_iii == direct.labels_iii))
+    assert agree > 0.8
+
+
 def test_method_1_shares_one_estimate_over_all_classes(office: SyntheticScene) -> None:
     result = refine(office.cloud, RefineConfig(dbscan_method=1), up=UP)
     assert result.shared is not None and result.shared.choice is not None

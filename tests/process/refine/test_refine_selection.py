@@ -9,7 +9,7 @@ from helpers_refine import grid_patch, labelled
 from process.refine import RefineConfig, refine
 from process.refine.dbscan import estimate_parameters
 from process.refine.selection import plateau_choice
-from process.refine.steps import voxel_cells
+from process.refine.steps import capped_cells, voxel_cells
 
 
 def _objects_with_specks(seed: int, n_objects: int) -> np.ndarray:
@@ -72,6 +72,23 @@ def test_voxel_cells_are_voxel_centroids_and_map_every_point() -> None:
     np.testing.assert_allclose(cells[cell_of[0]], [0.015, 0.015, 0.0], atol=1e-7)
     same, index = voxel_cells(points, 0.0)
     assert same is points and list(index) == [0, 1, 2]
+
+
+def test_voxel_cells_match_a_row_sort_of_the_voxel_indices() -> None:
+    points = (np.random.default_rng(0).normal(size=(5000, 3)) * 2).astype(np.float32)
+    keys = np.floor(points / np.float32(0.1)).astype(np.int64)
+    _, expected = np.unique(keys, axis=0, return_inverse=True)
+    cells, cell_of = voxel_cells(points, 0.1)
+    assert np.array_equal(cell_of, expected.reshape(-1))
+    np.testing.assert_allclose(cells[cell_of[7]], points[cell_of == cell_of[7]].mean(0), atol=1e-5)
+
+
+def test_capped_cells_grow_the_voxel_only_past_the_cap() -> None:
+    points = np.random.default_rng(1).uniform(0, 1, (20000, 3)).astype(np.float32)
+    cells, cell_of, voxel = capped_cells(points, 0.03, 10**6)
+    assert voxel == 0.03 and np.array_equal(cell_of, voxel_cells(points, 0.03)[1])
+    cells, cell_of, voxel = capped_cells(points, 0.03, 2000)
+    assert voxel > 0.03 and len(cells) <= 2000 and cell_of.max() == len(cells) - 1
 
 
 @pytest.mark.parametrize("step", [0.005, 0.015])
