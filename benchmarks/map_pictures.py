@@ -1,0 +1,36 @@
+"""The phase-I (fused) and phase-III (refined) maps of a `process run` folder, side by side.
+
+`python -m benchmarks.map_pictures RUN_DIR OUT.png` writes the two top views (process.preview)
+next to each other, both seen along the same up vector, for the README.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from process import outputs
+from process.cloud import read_cloud
+from process.preview import render_top_view, up_vector
+
+
+def main(argv: list[str]) -> int:
+    run, out = Path(argv[0]), Path(argv[1])
+    fused = read_cloud(run / outputs.MAP_FUSED)
+    refined = read_cloud(run / outputs.MAP_REFINED)
+    up = up_vector(refined.points, refined.labels, None)
+    views = []
+    for title, cloud in (("phase I: fused", fused), ("phase III: refined", refined)):
+        image = np.ascontiguousarray(render_top_view(cloud.points, cloud.labels, up=up))
+        cv2.putText(image, title, (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 2)
+        views.append(image)
+    cv2.imwrite(str(out), np.hstack(views)[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    print(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
