@@ -104,6 +104,7 @@ class ReplayPipeline:
         self._keyframes: Worker[_Keyframe] = Worker("keyframes", self._on_keyframe)
         self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
         self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
+        self._keyframes_skipped = 0  # following: keyframes the segmentation had no room for
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -121,6 +122,11 @@ class ReplayPipeline:
                     self._warn(text, logged=True)
                 gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
             trajectory = self._finish_odometry(ground_truth)
+            if self._keyframes_skipped:
+                self._warn(
+                    f"following: {self._keyframes_skipped} keyframes were left out of the map"
+                    " because segmentation could not keep up with the camera"
+                )
             self._keyframes.join()
             if self._segmenter is not None:
                 self.result.metrics["segmentation"] = {
@@ -204,8 +210,15 @@ class ReplayPipeline:
         self._log_frame(frame, depth_m, track)
         if track.is_keyframe and self._segmenter is not None:
             kf = _Keyframe(frame, depth_m, track.state.keyframe_id, track.world_from_camera)
+            # Following a live capture, a keyframe the segmentation has no room for is left out
+            # of the map rather than letting the whole job fall behind the camera; offline,
+            # every keyframe is segmented (the frame loop waits).
+            if self.follow_idle_s is None:
+                self._keyframes.submit(kf)
+            elif not self._keyframes.offer(kf):
+                self._keyframes_skipped += 1
+                return
             self._keyframe_stamps[kf.keyframe_id] = frame.stamp_ns
-            self._keyframes.submit(kf)
 
     def _log_frame(
         self, frame: RgbdFrame, depth_m: npt.NDArray[np.float32], track: TrackResult
@@ -391,7 +404,9 @@ class ReplayPipeline:
                 "lag_s_median": round(float(np.median(lag)), 3),
                 "lag_s_p95": round(float(np.percentile(lag, 95)), 3),
                 "lag_s_max": round(float(lag.max()), 3),
+                "keyframes_skipped": self._keyframes_skipped,
             }
+
         odo = self.result.metrics.get("odometry")
         seconds = self.clock.wall.get("odometry", 0.0) + self.clock.wall.get("depth", 0.0)
         if odo is not None:

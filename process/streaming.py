@@ -42,6 +42,15 @@ class Worker(Generic[T]):
         self._queue.put(item)
         self.blocked_seconds += time.perf_counter() - t0
 
+    def offer(self, item: T) -> bool:
+        """Queue an item if there is room now; return whether it was queued (never waits)."""
+        self._raise_if_failed()
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            return False
+        return True
+
     def join(self) -> None:
         """Handle every queued item, stop the thread and raise its error if it failed."""
         if self._thread.is_alive():

@@ -51,6 +51,7 @@ def test_follow_processes_every_frame_as_written_and_ends_with_the_capture(
         assert rec.finished and metrics["odometry"]["frames"] == len(rec) == 30
     lag = metrics["follow"]
     assert 0 < lag["lag_s_median"] <= lag["lag_s_max"] < 10  # seconds behind the writer
+    assert lag["keyframes_skipped"] == 0  # odometry only: no keyframe waits for segmentation
 
 
 @pytest.mark.slow

@@ -1,0 +1,39 @@
+"""A stage thread behind a bounded queue: order, back-pressure, offer without waiting, errors."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from process.errors import StageError
+from process.streaming import Worker
+
+
+def test_items_are_handled_in_order_and_offer_refuses_when_the_queue_is_full() -> None:
+    release = threading.Event()
+    seen: list[int] = []
+
+    def handle(item: int) -> None:
+        release.wait(timeout=10)
+        seen.append(item)
+
+    worker: Worker[int] = Worker("test", handle, max_pending=2)
+    assert worker.offer(0)  # taken by the thread, which then waits
+    while worker._queue.qsize():  # until the thread holds item 0
+        pass
+    assert worker.offer(1) and worker.offer(2)
+    assert not worker.offer(3)  # no room: refused at once, never queued
+    release.set()
+    worker.join()
+    assert seen == [0, 1, 2] and worker.items == 3
+
+
+def test_a_failing_stage_raises_in_the_producer() -> None:
+    def handle(item: int) -> None:
+        raise StageError(f"item {item} failed")
+
+    worker: Worker[int] = Worker("test", handle)
+    worker.submit(7)
+    with pytest.raises(StageError, match="item 7 failed"):
+        worker.join()
