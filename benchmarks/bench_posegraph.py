@@ -28,6 +28,30 @@ STEP_M = 0.12
 LOOP_M = 15.0
 
 
+def drifted_chain(
+    truth: list[npt.NDArray[np.float64]],
+    *,
+    bias_deg: tuple[str, float],
+    information: npt.NDArray[np.float64],
+) -> PoseGraph:
+    """Return a pose graph of odometry edges along `truth`, each step turned by a small bias.
+
+    The chain drifts as real odometry does (a constant rotation error per step); loop edges are
+    the caller's. `bias_deg` is an axis and an angle in degrees, e.g. ("z", 0.1).
+    """
+    bias = np.eye(4)
+    bias[:3, :3] = Rotation.from_euler(bias_deg[0], bias_deg[1], degrees=True).as_matrix()
+    graph = PoseGraph()
+    pose = truth[0].copy()
+    graph.add_node(pose)
+    for i in range(1, len(truth)):
+        step = np.linalg.inv(truth[i - 1]) @ truth[i] @ bias
+        pose = pose @ step
+        graph.add_node(pose)
+        graph.add_edge(Edge(i, i - 1, step, information, False))
+    return graph
+
+
 def _graph(n: int) -> tuple[PoseGraph, npt.NDArray[np.float64]]:
     """Return a drifted graph with loop closures, and the true positions (n, 3)."""
     rng = np.random.default_rng(0)
@@ -40,17 +64,8 @@ def _graph(n: int) -> tuple[PoseGraph, npt.NDArray[np.float64]]:
         pose[:3, :3] = Rotation.from_euler("z", a).as_matrix()
         pose[:3, 3] = [radius * np.cos(a), radius * np.sin(a), 0.02 * np.sin(7 * a)]
         truth.append(pose)
-    bias = np.eye(4)
-    bias[:3, :3] = Rotation.from_euler("z", 0.1, degrees=True).as_matrix()
-    graph = PoseGraph()
-    pose = truth[0].copy()
-    graph.add_node(pose)
     info = np.eye(6) * 300.0
-    for i in range(1, n):
-        step = np.linalg.inv(truth[i - 1]) @ truth[i] @ bias
-        pose = pose @ step
-        graph.add_node(pose)
-        graph.add_edge(Edge(i, i - 1, step, info, False))
+    graph = drifted_chain(truth, bias_deg=("z", 0.1), information=info)
     for i in range(per_lap, n, 4):
         j = i - per_lap + int(rng.integers(-1, 2))
         measured = np.linalg.inv(truth[j]) @ truth[i]

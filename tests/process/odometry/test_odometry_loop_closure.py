@@ -7,6 +7,7 @@ import numpy.typing as npt
 from helpers_odometry import K_QVGA, loop_poses, render, to_frame, track_all
 from scipy.spatial.transform import Rotation
 
+from benchmarks.bench_posegraph import drifted_chain
 from process.odometry.config import OdometryConfig
 from process.odometry.odometry import Odometry
 from process.odometry.pose_graph import Edge, PoseGraph
@@ -77,17 +78,8 @@ def test_many_laps_keep_the_true_loops_and_prune_the_false_ones() -> None:
     """Five laps of 120 keyframes, a loop edge every 4th keyframe, every 10th of them 50 cm off."""
     per_lap, n = 120, 600
     truth = _circle(per_lap) * (n // per_lap)
-    bias = np.eye(4)
-    bias[:3, :3] = Rotation.from_euler("y", 0.1, degrees=True).as_matrix()
-    graph = PoseGraph()
-    pose = truth[0].copy()
-    graph.add_node(pose)
     info = np.eye(6) * 300.0
-    for i in range(1, n):
-        step = np.linalg.inv(truth[i - 1]) @ truth[i] @ bias
-        pose = pose @ step
-        graph.add_node(pose)
-        graph.add_edge(Edge(i, i - 1, step, info, False))
+    graph = drifted_chain(truth, bias_deg=("y", 0.1), information=info)
     false = set()
     for k, i in enumerate(range(per_lap, n, 4)):
         measured = np.linalg.inv(truth[i - per_lap]) @ truth[i]
