@@ -47,6 +47,8 @@ class BackgroundLogger(NullLogger):
         this = object.__getattribute__
 
         def call(*args: Any, **kwargs: Any) -> None:
+            if this(self, "_closed"):  # nothing drains the queue any more: it would block
+                raise RuntimeError(f"{name} after close(): the logger is closed")
             this(self, "_raise_if_failed")()
             local = this(self, "_local")
             context = (getattr(local, "frame", None), getattr(local, "stage", None))
