@@ -38,11 +38,14 @@ class RefineConfig:
     # voxel centroids; past it the voxels grow (multi-million-point clouds), labels carried back
     dbscan_rule: str = "plateau"  # K choice: "plateau" (selection.py) or "literal" (PAPER.md)
     plateau_tolerance: float = 0.25  # "plateau": large-cluster counts may vary by this share
+    max_eps_m: float = 0.15  # eps_K candidates stop here (0: none, the paper's K = 1..k_max)
     min_cluster_points: int = 30  # clusters smaller than this go back to label 0 ...
     min_cluster_area_m2: float = 0.01  # ... or smaller than this surface at the class's density
     full_curves: bool = False  # run DBSCAN for every K, not only until the stable run ends
     regrowth: bool = True  # recover unlabelled points around each cluster
     object_gap_m: float = 0.15  # regrowth: same-class clusters this close are one object
+    attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
+    regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     seed: int = 0  # RANSAC sampling
 
     def __post_init__(self) -> None:
@@ -64,6 +67,7 @@ class RefineConfig:
             "k_max": (self.k_max, 3, 1000),
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
+            "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),

@@ -26,7 +26,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from process.refine.selection import plateau_choice, stable_choice, stable_run_closed
+from process.refine.selection import STABLE_RUN, plateau_choice, stable_choice, stable_run_closed
 
 logger = logging.getLogger(__name__)
 
@@ -196,6 +196,7 @@ def estimate_parameters(
     min_size: int = 1,
     min_area_m2: float = 0.0,
     tolerance: float = 0.0,
+    max_eps_m: float = 0.0,
 ) -> tuple[NeighbourTable, KannCurves, DbscanChoice]:
     """Choose (eps, MinPts) by KANN and the cluster-count curve; return the table for reuse.
 
@@ -203,7 +204,10 @@ def estimate_parameters(
     DBSCAN stops at the first K after it (the rest of the curve reads -1). "plateau" runs
     every K and picks from the counts of clusters with >= `min_size` core points, within a
     relative `tolerance` (selection.py). The size threshold is the larger of `min_size` and
-    `min_area_m2` of surface at the cloud's density (`surface_density`).
+    `min_area_m2` of surface at the cloud's density (`surface_density`). `max_eps_m` > 0
+    drops the K whose eps_K exceeds it (keeping at least 3): on a class of few, scattered
+    points, the 30th neighbour lies across the room and the "least strict density" joins
+    specks metres apart.
     """
     n = len(points)
     k_eff = min(k_max, n - 1)
@@ -211,6 +215,11 @@ def estimate_parameters(
         raise ValueError(f"adaptive DBSCAN needs at least 2 points, got {n}")
     table = NeighbourTable(points, k_query=query_size(k_max))
     eps = table.kann_eps(k_eff)
+    capped = ""
+    if max_eps_m > 0 and eps[-1] > max_eps_m:
+        k_eff = max(min(STABLE_RUN, k_eff), int(np.searchsorted(eps, max_eps_m, side="right")))
+        eps = eps[:k_eff]
+        capped = f"; K <= {k_eff}: eps_K beyond is over {max_eps_m:g} m"
     table.bind(eps)
     min_pts = table.min_pts()
     min_size = max(min_size, round(min_area_m2 * surface_density(table)))
@@ -227,6 +236,7 @@ def estimate_parameters(
         note = f"{note} ({min_size} points, tolerance {tolerance:g})"
     else:
         index, stable, note = stable_choice(n_clusters)
+    note += capped
     curves = KannCurves(np.arange(1, k_eff + 1), eps, min_pts, n_clusters, n_big)
     return (
         table,

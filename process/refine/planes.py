@@ -11,12 +11,13 @@ import numpy.typing as npt
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
+from process.refine.gravity import gravity
 
 logger = logging.getLogger(__name__)
 
 _PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
 _DENSITY_RADIUS_M = 0.05  # disc over which the cloud's surface density is counted
-_SNAP_UP_DEG = 40.0  # a given `up` is replaced by the normal of the largest plane this close to it
+_STRUCTURE_SHARE = 0.5  # a plane the network labels this much floor (ceiling, wall) is one
 
 
 @dataclass(frozen=True)
@@ -52,10 +53,13 @@ def segment_planes(
     cfg: RefineConfig,
     *,
     up: npt.NDArray[np.float64] | None,
+    labels: npt.NDArray[np.uint8] | None = None,
 ) -> PlaneSegmentation:
     """Find planes until one has fewer than Min inliers or fewer than Max points remain.
 
     Min is `cfg.plane_min_points` when set, else relative to the cloud (`min_plane_points`).
+    `labels` are the network's labels of the points (phase I), if any: where they call the
+    planes floor, ceiling or wall, they help find gravity (gravity.py) and classify the planes.
     """
     rng = np.random.default_rng(cfg.seed)
     min_points, density = min_plane_points(points, cfg, rng)
@@ -71,9 +75,14 @@ def segment_planes(
             break
         found.append((model, remaining[inliers]))
         remaining = np.delete(remaining, inliers)
-    up_used, source = _gravity(points, found, up, cfg)
+    if up is None and cfg.up is not None:
+        up = np.asarray(cfg.up, np.float64)
+    tolerance = cfg.horizontal_tolerance_deg
+    up_used, source = gravity(points, found, up, labels=labels, level_tolerance_deg=tolerance)
     heights = None if up_used is None else points @ up_used.astype(np.float32)
-    planes = tuple(_classify(points, m, idx, heights, up_used, cfg, min_points) for m, idx in found)
+    planes = tuple(
+        _classify(points, m, idx, heights, up_used, cfg, min_points, labels) for m, idx in found
+    )
     labels = np.zeros(len(points), np.uint8)
     for plane in planes:
         labels[plane.removed] = plane.label
@@ -142,32 +151,6 @@ def _fit_plane(points: npt.NDArray[np.float32]) -> npt.NDArray[np.float64]:
     return np.append(normal, -normal @ centroid)
 
 
-def _gravity(
-    points: npt.NDArray[np.float32],
-    found: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]],
-    up: npt.NDArray[np.float64] | None,
-    cfg: RefineConfig,
-) -> tuple[npt.NDArray[np.float64] | None, str]:
-    """Return gravity-up: the given one snapped to a near-level plane, else the largest plane's."""
-    if up is None and cfg.up is not None:
-        up = np.asarray(cfg.up, np.float64)
-    if up is not None:
-        up = np.asarray(up, np.float64) / np.linalg.norm(up)
-        # a hand-held first pose is level only to 10-20 degrees; the floor is level exactly
-        snap = math.cos(math.radians(_SNAP_UP_DEG))
-        level = [(len(i), m) for m, i in found if abs(m[:3] @ up) >= snap]
-        if not level:
-            return up, "argument"
-        normal = max(level, key=lambda t: t[0])[1][:3]
-        return normal * np.sign(normal @ up), "argument snapped to plane"
-    if not found:
-        return None, "none"
-    # no gravity given: the largest plane is taken as the floor, facing the bulk of the points
-    model = max(found, key=lambda t: len(t[1]))[0]
-    side = np.median(points @ model[:3].astype(np.float32) + np.float32(model[3]))
-    return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane"
-
-
 def _classify(
     points: npt.NDArray[np.float32],
     model: npt.NDArray[np.float64],
@@ -176,6 +159,7 @@ def _classify(
     up: npt.NDArray[np.float64] | None,
     cfg: RefineConfig,
     min_points: int,
+    labels: npt.NDArray[np.uint8] | None = None,
 ) -> Plane:
     """Classify a plane by its orientation and position along `up`, not by its size.
 
@@ -183,7 +167,9 @@ def _classify(
     it. Ceiling: level, at the top, that far above the bottom. Wall: upright, rising that high
     above the bottom and spanning half of it itself. A table top seen from above is level and
     at the bottom of a table scene, but nothing rises a room's height above it: it stays an
-    object. Only the plane's large
+    object. Where the network labels most of the plane floor (ceiling, wall), that stands in
+    for the room's height: a map of furniture seen from above holds the floor but little wall.
+    Only the plane's large
     connected pieces count: RANSAC's infinite plane also takes the coplanar faces of furniture
     far from the wall or floor, which must stay objects.
     """
@@ -200,14 +186,24 @@ def _classify(
     height = float(heights[kept].mean())
     low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
     label = 0
-    room = cfg.wall_min_height_m
-    if level and height - low <= cfg.structure_height_tol_m and high - height >= room:
+    room, tol = cfg.wall_min_height_m, cfg.structure_height_tol_m
+    said = _network_says(labels, kept)
+    if level and height - low <= tol and (high - height >= room or said == Label.FLOOR):
         label = Label.FLOOR
-    elif level and high - height <= cfg.structure_height_tol_m and height - low >= room:
+    elif level and high - height <= tol and (height - low >= room or said == Label.CEILING):
         label = Label.CEILING
-    elif upright and _is_wall(heights[kept], low, cfg.wall_min_height_m):
+    elif upright and (_is_wall(heights[kept], low, room) or said == Label.WALL):
         label = Label.WALL
     return Plane(model, indices, label, kept if label else none, height)
+
+
+def _network_says(labels: npt.NDArray[np.uint8] | None, kept: npt.NDArray[np.intp]) -> int:
+    """Return the structure label the network gives most of the plane's points, else 0."""
+    if labels is None or len(kept) == 0:
+        return 0
+    counts = np.bincount(labels[kept], minlength=int(Label.WALL) + 1)
+    label = int(np.argmax(counts[1 : int(Label.WALL) + 1])) + 1
+    return label if counts[label] >= _STRUCTURE_SHARE * len(kept) else 0
 
 
 def _is_wall(heights: npt.NDArray[np.float32], low: float, room_m: float) -> bool:

@@ -44,6 +44,7 @@ def regrow(
     r1_m: dict[int, float],
     gap_m: float = 0.0,
     up: npt.NDArray[np.float64] | None = None,
+    prior: npt.NDArray[np.uint8] | None = None,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -56,6 +57,11 @@ def regrow(
         up: gravity-up; boxes are then taken in a frame with z up, and each object's box
             reaches down to the floor (the lowest points): furniture stands on legs, bases
             and stems that a segmentation misses first.
+        prior: (N,) the network's labels (phase I), if given: growth runs twice, first
+            letting a point join only a cluster of its prior class (any, if its prior is 0),
+            then any. A correct point that DBSCAN set to 0 (noise at the edge of a thin
+            part) goes back to its own object before a neighbour of another class reaches
+            it; a wrong-class speck, whose class has no object near, is relabelled after.
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
@@ -68,19 +74,20 @@ def regrow(
         floor = float(np.percentile(points[:, 2], _FLOOR_PERCENTILE))
         table.low[:, 2] = np.minimum(table.low[:, 2], floor)
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
-    frontier = np.flatnonzero(clusters > 0)
-    open_ = np.flatnonzero(labels == 0)
     grown: list[npt.NDArray[np.intp]] = []
     waves = 0
-    while len(frontier) and len(open_):
-        joined, row = _wave(points, frontier, lookup[frontier], open_, table)
-        if len(joined) == 0:
-            break
-        labels[joined], clusters[joined] = table.label[row], ids[row].astype(np.int32)
-        lookup[joined] = row
-        grown.append(joined)
-        open_ = np.setdiff1d(open_, joined, assume_unique=True)
-        frontier, waves = joined, waves + 1
+    for own in (None,) if prior is None else (prior, None):  # its own class first, then any
+        frontier = np.flatnonzero(clusters > 0)
+        open_ = np.flatnonzero(labels == 0)
+        while len(frontier) and len(open_):
+            joined, row = _wave(points, frontier, lookup[frontier], open_, table, own)
+            if len(joined) == 0:
+                break
+            labels[joined], clusters[joined] = table.label[row], ids[row].astype(np.int32)
+            lookup[joined] = row
+            grown.append(joined)
+            open_ = np.setdiff1d(open_, joined, assume_unique=True)
+            frontier, waves = joined, waves + 1
     regrown = np.concatenate(grown) if grown else np.zeros(0, np.intp)
     r2 = {int(i): float(r) for i, r in zip(ids, table.r2, strict=True)}
     objects = {int(i): int(o) + 1 for i, o in zip(ids, table.object, strict=True)}
@@ -157,8 +164,12 @@ def _wave(
     frontier_row: npt.NDArray[np.intp],
     open_: npt.NDArray[np.intp],
     table: _Clusters,
+    prior: npt.NDArray[np.uint8] | None = None,
 ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """Return the open points that join in this wave and the cluster row each joins."""
+    """Return the open points that join in this wave and the cluster row each joins.
+
+    With `prior`, a point with a prior label joins only a cluster of that class.
+    """
     k = min(_CANDIDATES, len(frontier))
     reach = float(table.r1.max())
     distance, nearest = cKDTree(points[frontier]).query(
@@ -172,6 +183,9 @@ def _wave(
     xyz = points[open_[near]].astype(np.float64)[:, None, :]
     inside = np.all((xyz >= table.low[rows]) & (xyz <= table.high[rows]), axis=2)
     ok = hit & (distance <= table.r1[rows]) & inside
+    if prior is not None:
+        own = prior[open_[near]][:, None]
+        ok &= (own == 0) | (own == table.label[rows])
     joins = ok.any(axis=1)
     first = ok[joins].argmax(axis=1)  # nearest qualifying frontier point
     return open_[near[joins]], rows[joins, first]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import math
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -11,9 +10,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from capture.recording import NUM_LABELS
+from capture.recording import NUM_LABELS, OBJECT_LABELS
 from process.cloud import LabelledCloud
 from process.errors import StageError
+from process.refine.cells import attached_clusters, capped_cells
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.outliers import sor_inliers
@@ -21,8 +21,6 @@ from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
 
 logger = logging.getLogger(__name__)
-
-_MIN_VOXEL_M = 0.005  # capped_cells starts here when asked for points (voxel 0)
 
 
 @dataclass(frozen=True)
@@ -114,7 +112,7 @@ def refine(
         now = time.perf_counter()
         seconds[step], tick = now - tick, now
 
-    planes = segment_planes(cloud.points, cfg, up=up)
+    planes = segment_planes(cloud.points, cfg, up=up, labels=cloud.labels)
     lap("planes")
     objects = np.flatnonzero(~planes.structural)
     keep = _sor(cloud.points[objects], cfg)
@@ -130,8 +128,15 @@ def refine(
     regrown, r2 = np.zeros(0, np.intp), {}
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
-        grown = regrow(points, labels, clusters, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up)
-        labels_iii[objects], clusters_iii[objects] = grown.labels, grown.clusters
+        # only objects grow: structure is the plane step's, and a leftover wall or floor
+        # piece of the network's would otherwise take the object points DBSCAN set to 0
+        seeds = np.where(np.isin(labels, OBJECT_LABELS), clusters, 0).astype(np.int32)
+        prior = cloud.labels[objects] if cfg.regrow_own_class_first else None
+        grown = regrow(
+            points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior
+        )
+        labels_iii[objects] = grown.labels
+        clusters_iii[objects] = np.where(seeds > 0, grown.clusters, clusters)
         regrown, r2 = objects[grown.regrown], grown.r2_m
     lap("regrowth")
     seconds["total"] = time.perf_counter() - start
@@ -163,7 +168,10 @@ def _correct(
         entry, cluster_of = _cluster_class(label, cells, cfg, shared)
         sizes = np.bincount(cluster_of[cluster_of >= 0], minlength=1)
         min_size = cfg.min_cluster_points if entry.choice is None else entry.choice.min_size
-        big = np.flatnonzero(sizes >= min_size)
+        keep = sizes >= min_size
+        if cfg.attach_small_clusters:
+            keep |= attached_clusters(cells, cluster_of, keep, cfg.object_gap_m)
+        big = np.flatnonzero(keep)
         new_id = np.zeros(len(sizes) + 1, np.int32)  # index 0 takes noise (-1)
         new_id[big + 1] = np.arange(next_id, next_id + len(big))
         ids = new_id[cluster_of + 1][cell_of]  # each point takes its cell's cluster
@@ -174,51 +182,6 @@ def _correct(
             entry, points=len(members), clusters=len(big), relabelled=int((ids == 0).sum())
         )
     return out_labels, out_clusters, per_class, shared
-
-
-def voxel_cells(
-    points: npt.NDArray[np.float32], voxel_m: float
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.intp]]:
-    """Return the centroid of each occupied voxel and each point's voxel (voxel_m 0: points).
-
-    Adaptive DBSCAN runs on these cells: K = 1..K_max then spans the same distances in metres
-    at any density (at 7 mm spacing, K = 30 reaches only ~3 cm and splits every object along
-    each missed stripe), and a million-point class costs what a 2 cm map costs. Cells come in
-    the lexicographic order of their (x, y, z) voxel indices.
-    """
-    if voxel_m <= 0 or len(points) == 0:
-        return points, np.arange(len(points))
-    keys = np.floor(points / np.float32(voxel_m)).astype(np.int64)
-    keys -= keys.min(axis=0)
-    span = keys.max(axis=0) + 1
-    if float(np.prod(span.astype(np.float64))) < 2.0**62:
-        # one int64 per point, in the same order as the rows: a 1-D sort, not a row sort
-        packed = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
-        del keys
-        _, cell_of, counts = np.unique(packed, return_inverse=True, return_counts=True)
-    else:
-        _, cell_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    cell_of = cell_of.reshape(-1)
-    sums = np.stack([np.bincount(cell_of, points[:, a], len(counts)) for a in range(3)], 1)
-    return (sums / counts[:, None]).astype(np.float32), cell_of
-
-
-def capped_cells(
-    points: npt.NDArray[np.float32], voxel_m: float, max_cells: int
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.intp], float]:
-    """Return voxel_cells at `voxel_m`, or at the smallest coarser voxel giving <= max_cells.
-
-    The voxel grows only when the cells outnumber `max_cells` (a multi-million-point cloud,
-    or a volume rather than a surface): the steps on the cells then cost what `max_cells`
-    points cost, at any size of cloud, and every point takes its cell's result.
-    Returns the cells, each point's cell and the voxel used.
-    """
-    cells, cell_of = voxel_cells(points, voxel_m)
-    while len(cells) > max_cells:
-        # cells fall with the square of the voxel on surfaces, faster in volumes
-        voxel_m = max(voxel_m, _MIN_VOXEL_M) * max(1.1, math.sqrt(len(cells) / max_cells))
-        cells, cell_of = voxel_cells(points, voxel_m)
-    return cells, cell_of, voxel_m
 
 
 def _sor(points: npt.NDArray[np.float32], cfg: RefineConfig) -> npt.NDArray[np.bool_]:
@@ -286,4 +249,5 @@ def _rule(cfg: RefineConfig) -> dict[str, Any]:
         "min_size": cfg.min_cluster_points,
         "min_area_m2": cfg.min_cluster_area_m2,
         "tolerance": cfg.plateau_tolerance,
+        "max_eps_m": cfg.max_eps_m,
     }

@@ -9,7 +9,7 @@ from helpers_refine import grid_patch, labelled
 from process.refine import RefineConfig, refine
 from process.refine.dbscan import estimate_parameters
 from process.refine.selection import plateau_choice
-from process.refine.steps import capped_cells, voxel_cells
+from process.refine.cells import capped_cells, voxel_cells
 
 
 def _objects_with_specks(seed: int, n_objects: int) -> np.ndarray:

@@ -1,0 +1,105 @@
+"""Gravity-up for the plane step: from the planes found, a hint and the network's own labels.
+
+The hint the pipeline passes is the first camera's "up" (minus its optical y axis). A hand-held
+camera is level only roughly: on TUM `fr1_rpy` the first frame looks down at a desk and its up
+lies 48 degrees from gravity (the mocap frame's z, checked against groundtruth.txt), closer to
+a wall's normal than to the floor's. Snapping the hint to the nearest large plane then takes a
+wall for the floor, and the floor becomes "wall".
+
+Where the network labels structure (real-image networks and the simulator checkpoint label
+ceiling, floor and wall), those labels say which planes are level: the up chosen is the plane
+normal, among those within `_MAX_HINT_DEG` of the hint, under which the most plane inliers carry
+a structural label that fits their plane's orientation (floor and ceiling on level planes, wall
+on upright ones), minus those that do not. Without such labels (clouds labelled with objects
+only), the hint snaps to the largest plane within `_SNAP_UP_DEG`, as before.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Label
+
+_SNAP_UP_DEG = 40.0  # a given `up` is replaced by the normal of the largest plane this close to it
+_MAX_HINT_DEG = 65.0  # with network evidence: up lies within this of the hint
+_MIN_EVIDENCE = 0.05  # ... and at least this share of the planes' inliers carry structure labels
+
+Found = list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]]  # (plane model, inliers)
+
+
+def gravity(
+    points: npt.NDArray[np.float32],
+    found: Found,
+    up: npt.NDArray[np.float64] | None,
+    *,
+    labels: npt.NDArray[np.uint8] | None,
+    level_tolerance_deg: float,
+) -> tuple[npt.NDArray[np.float64] | None, str]:
+    """Return (gravity-up, how it was found) from the hint `up`, the planes and the labels.
+
+    Sources: "labelled planes" (the network's structure labels chose among plane normals near
+    the hint), "argument snapped to plane", "argument", "largest plane" (no hint) or "none".
+    """
+    if up is not None:
+        up = np.asarray(up, np.float64) / np.linalg.norm(up)
+        if labels is not None:
+            voted = _labelled_up(found, up, labels, level_tolerance_deg)
+            if voted is not None:
+                return voted, "labelled planes"
+        # a hand-held first pose is level only to 10-20 degrees; the floor is level exactly
+        snap = math.cos(math.radians(_SNAP_UP_DEG))
+        level = [(len(i), m) for m, i in found if abs(m[:3] @ up) >= snap]
+        if not level:
+            return up, "argument"
+        normal = max(level, key=lambda t: t[0])[1][:3]
+        return normal * np.sign(normal @ up), "argument snapped to plane"
+    if not found:
+        return None, "none"
+    # no gravity given: the largest plane is taken as the floor, facing the bulk of the points
+    model = max(found, key=lambda t: len(t[1]))[0]
+    side = np.median(points @ model[:3].astype(np.float32) + np.float32(model[3]))
+    return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane"
+
+
+def _labelled_up(
+    found: Found,
+    hint: npt.NDArray[np.float64],
+    labels: npt.NDArray[np.uint8],
+    tolerance_deg: float,
+) -> npt.NDArray[np.float64] | None:
+    """Return the plane normal near `hint` that the network's structure labels agree with most.
+
+    None when the planes carry too few structure labels to say, or no normal is near the hint.
+    """
+    if not found:
+        return None
+    normals = np.array([m[:3] for m, _ in found])
+    # per plane: inliers the network calls level structure (floor, ceiling) and upright (wall)
+    level_votes = np.array(
+        [np.isin(labels[i], (Label.FLOOR, Label.CEILING)).sum() for _, i in found]
+    )
+    wall_votes = np.array([(labels[i] == Label.WALL).sum() for _, i in found])
+    total = sum(len(i) for _, i in found)
+    if level_votes.sum() + wall_votes.sum() < _MIN_EVIDENCE * total:
+        return None
+    cos_near = math.cos(math.radians(_MAX_HINT_DEG))
+    level_cos = math.cos(math.radians(tolerance_deg))
+    upright_cos = math.sin(math.radians(tolerance_deg))
+    best: tuple[float, npt.NDArray[np.float64]] | None = None
+    for normal in normals:
+        if abs(normal @ hint) < cos_near:
+            continue
+        cosine = np.abs(normals @ normal)
+        level, upright = cosine >= level_cos, cosine <= upright_cos
+        score = float(
+            (level_votes * level).sum()
+            + (wall_votes * upright).sum()
+            - (wall_votes * level).sum()
+            - (level_votes * upright).sum()
+        )
+        if score > 0 and (best is None or score > best[0]):
+            best = (score, normal * np.sign(normal @ hint))
+    return None if best is None else best[1]
