@@ -28,6 +28,7 @@ class RefineConfig:
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
+    plane_object_width_m: float = 0.15  # object-labelled regions this wide on a plane stay
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
@@ -68,6 +69,7 @@ class RefineConfig:
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
+            "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),

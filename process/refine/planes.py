@@ -12,6 +12,7 @@ import numpy.typing as npt
 from capture.recording import Label
 from process.refine.config import RefineConfig
 from process.refine.gravity import gravity
+from process.refine.plane_grid import grid_of, plane_uv, wide_object_regions
 
 logger = logging.getLogger(__name__)
 
@@ -194,6 +195,12 @@ def _classify(
         label = Label.CEILING
     elif upright and (_is_wall(heights[kept], low, room) or said == Label.WALL):
         label = Label.WALL
+    if label and labels is not None and cfg.plane_object_width_m > 0:
+        # objects lying flat on the structure stay objects; label bleed onto it does not
+        flat = wide_object_regions(
+            plane_uv(points[kept], model), labels[kept], width_m=cfg.plane_object_width_m
+        )
+        kept = kept[~flat]
     return Plane(model, indices, label, kept if label else none, height)
 
 
@@ -222,13 +229,9 @@ def _large_pieces(
     """Return the inliers in the largest connected piece, or in any piece of >= Min points."""
     from scipy import ndimage
 
-    normal = model[:3]
-    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    uv = points @ np.stack([u, np.cross(normal, u)], axis=1).astype(np.float32)
+    uv = plane_uv(points, model)
     extent = float((uv.max(axis=0) - uv.min(axis=0)).max()) if len(uv) else 0.0
-    cell = max(_PIECE_CELL_M, extent / 2000)  # bounded grid for stray far inliers
-    ij = ((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    ij = grid_of(uv, max(_PIECE_CELL_M, extent / 2000))  # bounded grid for stray far inliers
     grid = np.zeros(tuple(ij.max(axis=0) + 1), bool)
     grid[ij[:, 0], ij[:, 1]] = True
     pieces, _ = ndimage.label(grid, structure=np.ones((3, 3), bool))

@@ -1,0 +1,62 @@
+"""A plane's points on a 2-D grid: its connected pieces, and the objects the network sees on it."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Label
+
+
+def plane_uv(
+    points: npt.NDArray[np.float32], model: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float32]:
+    """Return (N, 2) coordinates of the points in two unit axes of the plane."""
+    normal = model[:3]
+    u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    uv: npt.NDArray[np.float32] = points @ np.stack([u, np.cross(normal, u)], axis=1).astype(
+        np.float32
+    )
+    return uv
+
+
+def grid_of(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]:
+    """Return each point's (i, j) cell of side `cell_m`, counted from the lowest corner."""
+    if len(uv) == 0:
+        return np.zeros((0, 2), np.int64)
+    ij: npt.NDArray[np.int64] = ((uv - uv.min(axis=0)) / cell_m).astype(np.int64)
+    return ij
+
+
+def wide_object_regions(
+    uv: npt.NDArray[np.float32], labels: npt.NDArray[np.uint8], *, width_m: float
+) -> npt.NDArray[np.bool_]:
+    """Return the points in object-labelled regions of the plane at least `width_m` wide.
+
+    A cell is object-labelled where most of its labelled points carry an object label, and
+    the region's unlabelled points go with it: regrowth may fill them.
+
+    A plane's points that the network calls an object (4-10) are either label bleed, a band a
+    few centimetres wide along the object's edge where it meets the floor or wall, or an
+    object lying flat on it (a television on a wall, a rug, a whiteboard). A morphological
+    opening of the cells where object labels are the majority, by a square of `width_m`,
+    removes the bands and keeps the wide regions: those stay objects.
+    """
+    from scipy import ndimage
+
+    out = np.zeros(len(uv), bool)
+    is_object = labels >= Label.TABLE
+    if not is_object.any() or width_m <= 0:
+        return out
+    cell = width_m / 3
+    ij = grid_of(uv, cell)
+    shape = tuple(ij.max(axis=0) + 1)
+    flat = np.ravel_multi_index((ij[:, 0], ij[:, 1]), shape)
+    votes = np.bincount(flat, is_object, minlength=int(np.prod(shape)))
+    total = np.bincount(flat, labels > 0, minlength=int(np.prod(shape)))
+    mask = (2 * votes > total).reshape(shape)
+    square = np.ones((3, 3), bool)
+    mask = ndimage.binary_opening(mask, square)
+    out[:] = mask.ravel()[flat] & ((labels == 0) | is_object)
+    return out
