@@ -128,10 +128,7 @@ def _cluster_table(
     np.maximum.at(o_high, obj, high)
     r1 = np.array([r1_m.get(int(c), 0.0) for c in label])
     r2 = np.linalg.norm(o_high - o_low, axis=1)[obj] / 2
-    import os
-
-    m = r1[:, None] + float(os.environ.get("MARGIN", "0"))
-    return _Clusters(label, obj, o_low[obj] - m, o_high[obj] + m, r1, r2)
+    return _Clusters(label, obj, o_low[obj] - r1[:, None], o_high[obj] + r1[:, None], r1, r2)
 
 
 def _frame(up: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
