@@ -28,7 +28,7 @@ class RefineConfig:
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
-    plane_object_width_m: float = 0.15  # object-labelled regions this wide on a plane stay
+    plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
