@@ -39,6 +39,7 @@ class RefineConfig:
     # voxel centroids; past it the voxels grow (multi-million-point clouds), labels carried back
     dbscan_rule: str = "plateau"  # K choice: "plateau" (selection.py) or "literal" (PAPER.md)
     plateau_tolerance: float = 0.25  # "plateau": large-cluster counts may vary by this share
+    min_pts_statistic: str = "lower_quartile"  # MinPts_K: "mean" (paper) or "lower_quartile"
     max_eps_m: float = 0.15  # eps_K candidates stop here (0: none, the paper's K = 1..k_max)
     min_cluster_points: int = 30  # clusters smaller than this go back to label 0 ...
     min_cluster_area_m2: float = 0.01  # ... or smaller than this surface at the class's density
@@ -82,6 +83,11 @@ class RefineConfig:
             raise ConfigError(
                 "refinement.plane_min_points must be 0 (relative to the cloud) or >= 3, "
                 f"got {self.plane_min_points}"
+            )
+        if self.min_pts_statistic not in ("mean", "lower_quartile"):
+            raise ConfigError(
+                "refinement.min_pts_statistic must be mean or lower_quartile, "
+                f"got {self.min_pts_statistic!r}"
             )
         if self.dbscan_rule not in RULES:
             raise ConfigError(

@@ -250,4 +250,5 @@ def _rule(cfg: RefineConfig) -> dict[str, Any]:
         "min_area_m2": cfg.min_cluster_area_m2,
         "tolerance": cfg.plateau_tolerance,
         "max_eps_m": cfg.max_eps_m,
+        "min_pts_statistic": cfg.min_pts_statistic,
     }
