@@ -20,8 +20,13 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from capture.recording import Label
+
 _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, nearest first
 _FLOOR_PERCENTILE = 0.5  # the floor under the objects: this low a percentile of their heights
+# classes that stand on the floor, on legs, bases and stems: their boxes reach down to it. A
+# monitor or clutter stands on a table: reaching down, it would take the table top under it.
+STANDING = (Label.TABLE, Label.CHAIR, Label.PERSON, Label.PLANT, Label.SOFA)
 
 
 @dataclass(frozen=True)
@@ -54,9 +59,10 @@ def regrow(
         clusters: (N,) cluster id per point, 0 = none; every cluster has one class.
         r1_m: class label -> r1 (the class's chosen eps).
         gap_m: clusters of one class whose boxes come this close are one object.
-        up: gravity-up; boxes are then taken in a frame with z up, and each object's box
-            reaches down to the floor (the lowest points): furniture stands on legs, bases
-            and stems that a segmentation misses first.
+        up: gravity-up; boxes are then taken in a frame with z up, and the box of each
+            object of a class that stands on the floor (STANDING) reaches down to it (the
+            lowest points): furniture stands on legs, bases and stems that a segmentation
+            misses first.
         prior: (N,) the network's labels (phase I), if given: growth runs twice, first
             letting a point join only a cluster of its prior class (any, if its prior is 0),
             then any. A correct point that DBSCAN set to 0 (noise at the edge of a thin
@@ -72,7 +78,8 @@ def regrow(
     table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m)
     if up is not None and len(points):
         floor = float(np.percentile(points[:, 2], _FLOOR_PERCENTILE))
-        table.low[:, 2] = np.minimum(table.low[:, 2], floor)
+        stands = np.isin(table.label, STANDING)
+        table.low[stands, 2] = np.minimum(table.low[stands, 2], floor)
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
     grown: list[npt.NDArray[np.intp]] = []
     waves = 0
