@@ -273,3 +273,59 @@ def _vote(
     seen = np.abs(depth[v, u] - z[idx]) <= 0.02 + 0.01 * z[idx]
     idx, u, v = idx[seen], u[seen], v[seen]
     np.add.at(votes, (idx, pred[v, u].astype(np.intp)), 1.0)
+
+
+@dataclass(frozen=True)
+class SimFusedMap:
+    """A map fused from degraded keyframes as `process run` fuses them, and its truth."""
+
+    cloud: LabelledCloud  # the fused map (phase I)
+    truth: npt.NDArray[np.uint8]  # (N,) label of the nearest ground-truth point (0 beyond 5 cm)
+    up: npt.NDArray[np.float64]  # the hint the pipeline passes: the first camera's up
+
+
+MILD = SimErrors(drop_max=0.15, holes_per_m2=1.0, wrong_per_m2=0.8, blobs_per_view=1.5)
+
+
+def sim_fused_map(
+    *, seed: int = 0, keyframes: int = 12, width: int = 320, errors: SimErrors = MILD
+) -> SimFusedMap:
+    """Return the simulator's room `seed` fused (TSDF, process.fusion) from degraded keyframes.
+
+    A network that labels structure too: floor, wall and ceiling pixels keep their true label
+    wherever no object mask (right or wrong) was painted; objects are degraded as in
+    `sim_scene`. Depth is noisy (1 % relative); poses are the true ones.
+    """
+    from process.evaluate import match_labels
+    from process.fusion.votes import Fusion, FusionConfig
+
+    scene, renderer = _room(seed)
+    rng = np.random.default_rng([seed, 13])
+    gt = _sample(scene, renderer, 0.015, 0.03, seed)
+    traj = handheld_loop(scene, frames=1200, fps=30.0, seed=seed)  # type: ignore[arg-type]
+    poses = traj.world_from_camera[np.linspace(0, 1199, keyframes).astype(int)]
+    k = d435_rig(width, width * 3 // 4).color
+    anchors = _anchors(gt.points_m, gt.labels, gt.instances, 0.015, errors, rng)
+    fusion = Fusion(FusionConfig())
+    for pose in poses:
+        view = renderer.render_color(pose, intrinsics=k)
+        pred = _degrade(
+            view.labels, view.instances, view.depth_m, pose, k, anchors, errors, width / 320, rng
+        )
+        structure = (pred == 0) & (view.labels > 0) & (view.labels < FIRST_OBJECT)
+        pred[structure] = view.labels[structure]
+        depth = view.depth_m * (1 + errors.depth_noise * rng.standard_normal(view.depth_m.shape))
+        fusion.integrate(
+            view.color,
+            np.nan_to_num(depth).astype(np.float32),
+            pred,
+            np.full(pred.shape, 0.9, np.float32),
+            intrinsics=k,
+            world_from_camera=pose,
+        )
+    cloud = fusion.cloud()
+    colors = np.asarray(LABEL_COLORS, np.uint8)[gt.labels]
+    truth = match_labels(
+        cloud.points, LabelledCloud(gt.points_m, colors, gt.labels), max_distance_m=0.05
+    )
+    return SimFusedMap(cloud, truth, -poses[0][:3, 1])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from process.errors import ConfigError
 from process.refine.selection import RULES
@@ -49,6 +50,26 @@ class RefineConfig:
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     seed: int = 0  # RANSAC sampling
+
+    @classmethod
+    def paper(cls, **overrides: Any) -> RefineConfig:
+        """Return PAPER.md's literal reading wherever our defaults depart from it.
+
+        The literal K rule (first run of 3 equal counts), MinPts the mean count, K = 1..k_max
+        uncapped, clusters kept by size alone, regrowth blind to the network's labels and
+        every inlier of a structural plane taken. What stays ours: DBSCAN on voxel cells,
+        planes told by orientation and position (and the network's structure labels), only
+        object classes regrowing, inside their object's box.
+        """
+        paper: dict[str, Any] = {
+            "dbscan_rule": "literal",
+            "min_pts_statistic": "mean",
+            "max_eps_m": 0.0,
+            "attach_small_clusters": False,
+            "regrow_own_class_first": False,
+            "plane_object_width_m": 0.0,
+        }
+        return cls(**{**paper, **overrides})
 
     def __post_init__(self) -> None:
         checks = {

@@ -85,3 +85,46 @@ def test_without_clusters_nothing_grows() -> None:
     grown = regrow(points, zeros, zeros.astype(np.int32), r1_m={})
     assert len(grown.regrown) == 0
     assert (grown.labels == 0).all()
+
+
+def test_a_point_goes_back_to_its_own_class_before_a_nearer_cluster_takes_it() -> None:
+    """DBSCAN set a chair point to 0; a table cluster is nearer, its own chair is in reach."""
+    chair = grid_patch((0.0, 0.4), (0.0, 0.4), z=0.45)
+    table = grid_patch((0.44, 1.0), (0.0, 0.4), z=0.45)
+    edge = np.array([[0.42, 0.2, 0.45]], np.float32)  # 2 cm from both, in both grown boxes
+    points = np.concatenate([chair, table, edge])
+    labels = np.r_[np.full(len(chair), 5), np.full(len(table), 4), 0].astype(np.uint8)
+    clusters = np.r_[np.full(len(chair), 1), np.full(len(table), 2), 0].astype(np.int32)
+    prior = labels.copy()
+    prior[-1] = 5  # the network called it chair
+    r1 = {4: 0.05, 5: 0.05}
+    own = regrow(points, labels, clusters, r1_m=r1, prior=prior)
+    assert own.labels[-1] == 5
+    prior[-1] = 9  # a monitor speck: its class has no object here, the nearer cluster takes it
+    other = regrow(points, labels, clusters, r1_m=r1, prior=prior)
+    assert other.labels[-1] in (4, 5) and other.regrown.tolist() == [len(points) - 1]
+
+
+def test_a_table_box_reaches_the_floor_a_monitor_box_does_not() -> None:
+    """Tables stand on legs the network misses; a monitor stands on a table, whose side and
+    legs below it must not become monitor."""
+    up = np.array([0.0, 0.0, 1.0])
+    floor_marker = grid_patch((3.0, 3.2), (0.0, 0.2), z=0.0)  # the lowest points: the floor
+    table = grid_patch((0.0, 0.6), (0.0, 0.6), z=0.75)
+    monitor = grid_patch((1.5, 2.0), (0.8, 1.2))[:, [0, 2, 1]]  # upright, beside the table
+    monitor[:, 1] = 0.3
+    column = np.arange(0.05, 0.8, 0.02)  # unlabelled columns down to the floor under each
+    table_leg = np.array([[0.02, 0.02, z] for z in column[column < 0.74]], np.float32)
+    stand = np.array([[1.75, 0.3, z] for z in column], np.float32)
+    points = np.concatenate([floor_marker, table, monitor, table_leg, stand])
+    labels = np.r_[
+        np.zeros(len(floor_marker)), np.full(len(table), 4), np.full(len(monitor), 9),
+        np.zeros(len(table_leg) + len(stand)),
+    ].astype(np.uint8)  # fmt: skip
+    clusters = np.where(labels == 4, 1, np.where(labels == 9, 2, 0)).astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.05, 9: 0.05}, up=up)
+    n = len(points) - len(stand)
+    assert (grown.labels[n - len(table_leg) : n] == 4).all()  # the table's leg, to the floor
+    stand_labels = grown.labels[n:]
+    assert (stand_labels[column > 0.76] == 9).all()  # within r1 below the monitor
+    assert (stand_labels[column < 0.7] == 0).all()  # not down to the floor

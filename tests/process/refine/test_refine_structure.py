@@ -1,0 +1,109 @@
+"""Structure told by the network's labels: gravity among plane normals, floors seen from above,
+flat objects on walls, and the cap on eps for sparse classes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers_refine import grid_patch
+
+from capture.recording import Label
+from process.refine import RefineConfig
+from process.refine.cells import attached_clusters
+from process.refine.dbscan import estimate_parameters
+from process.refine.plane_grid import wide_object_regions
+from process.refine.planes import segment_planes
+
+CFG = RefineConfig(plane_min_points=2000, plane_max_remaining=100)
+
+
+def _room() -> tuple[np.ndarray, np.ndarray]:
+    """A 4 x 3 m floor at z = 0 labelled floor, two 2.5 m walls labelled wall, a desk top."""
+    floor = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)
+    wall_x = grid_patch((0.0, 4.0), (0.0, 2.5), step=0.04)[:, [0, 2, 1]]  # the plane y = 0
+    wall_y = grid_patch((0.0, 3.0), (0.0, 2.5), step=0.04)[:, [2, 0, 1]]  # the plane x = 0
+    desk = grid_patch((1.0, 2.2), (1.0, 1.8), z=0.75, step=0.02)
+    points = np.concatenate([floor, wall_x, wall_y, desk])
+    labels = np.concatenate(
+        [
+            np.full(len(floor), Label.FLOOR),
+            np.full(len(wall_x) + len(wall_y), Label.WALL),
+            np.full(len(desk), Label.TABLE),
+        ]
+    ).astype(np.uint8)
+    return points, labels
+
+
+def _tilted(degrees: float, towards: np.ndarray) -> np.ndarray:
+    angle = float(np.radians(degrees))
+    tilted: np.ndarray = np.array([0.0, 0.0, np.cos(angle)]) + np.sin(angle) * towards
+    return tilted
+
+
+def test_gravity_52_degrees_off_is_found_from_the_labelled_planes() -> None:
+    """TUM fr1_rpy: the first camera's up lies 48 deg from gravity, 36 from a wall's normal."""
+    points, labels = _room()
+    hint = _tilted(52.0, np.array([0.0, 1.0, 0.0]))  # 38 deg from the wall y = 0's normal
+    seg = segment_planes(points, CFG, up=hint, labels=labels)
+    assert seg.up_source == "labelled planes"
+    assert seg.up is not None and seg.up @ [0.0, 0.0, 1.0] == pytest.approx(1.0, abs=1e-3)
+    floor = seg.labels[:7500]
+    assert (floor == Label.FLOOR).mean() > 0.99
+    assert (seg.labels[points[:, 2] == np.float32(0.75)] == 0).all()  # the desk stays an object
+    blind = segment_planes(points, CFG, up=hint, labels=None)  # no labels: snap to the nearest
+    assert blind.up_source == "argument snapped to plane"
+    assert blind.up is not None and abs(blind.up[2]) < 0.1  # ... which is the wall: wrong
+
+
+def test_a_floor_seen_from_above_with_no_wall_is_floor_when_the_network_says_so() -> None:
+    floor = grid_patch((0.0, 3.0), (0.0, 2.0), step=0.03)
+    chair = grid_patch((1.0, 1.45), (1.0, 1.45), z=0.45, step=0.02)
+    points = np.concatenate([floor, chair])
+    labels = np.r_[np.full(len(floor), Label.FLOOR), np.full(len(chair), Label.CHAIR)]
+    up = np.array([0.0, 0.0, 1.0])
+    seg = segment_planes(points, RefineConfig(), up=up, labels=labels.astype(np.uint8))
+    assert (seg.labels[: len(floor)] == Label.FLOOR).all()
+    assert (seg.labels[len(floor) :] == 0).all()
+    unlabelled = segment_planes(points, RefineConfig(), up=up, labels=None)
+    assert (unlabelled.labels == 0).all()  # nothing rises a room's height: could be a table
+
+
+def test_a_flat_screen_on_a_wall_stays_an_object_and_bleed_goes_with_the_wall() -> None:
+    wall = grid_patch((0.0, 3.0), (0.0, 2.5), step=0.02)  # in its own plane's (u, v)
+    uv = wall[:, :2]
+    labels = np.zeros(len(wall), np.uint8)
+    screen = (np.abs(uv[:, 0] - 1.0) < 0.3) & (np.abs(uv[:, 1] - 1.5) < 0.2)  # 60 x 40 cm
+    bleed = (uv[:, 1] < 0.05) & (uv[:, 0] < 1.5)  # 5 cm band along a sofa's foot
+    labels[screen] = Label.TV_MONITOR
+    labels[bleed] = Label.SOFA
+    labels[screen & (np.arange(len(wall)) % 3 == 0)] = 0  # the network missed a third
+    kept = wide_object_regions(uv, labels, width_m=0.25)
+    assert kept[screen].mean() > 0.9  # labelled and missed points alike
+    assert not kept[bleed].any()
+    outside = kept & ~screen  # only the screen's border cells reach past it: < one cell
+    gap = np.maximum(np.abs(uv[outside] - (1.0, 1.5)) - (0.3, 0.2), 0.0).max(axis=1)
+    assert (gap < 0.25 / 3).all()
+
+
+def test_eps_stops_at_the_cap_for_a_class_of_scattered_specks() -> None:
+    rng = np.random.default_rng(0)
+    centres = rng.uniform(0.0, 4.0, (12, 3))
+    specks = (centres[:, None, :] + rng.normal(0.0, 0.01, (12, 8, 3))).reshape(-1, 3)
+    _, curves, choice = estimate_parameters(specks, k_max=30, rule="plateau", min_size=30)
+    assert choice.eps_m > 0.5  # uncapped: the 30th neighbour is another speck metres away
+    _, curves, choice = estimate_parameters(
+        specks, k_max=30, rule="plateau", min_size=30, max_eps_m=0.15
+    )
+    assert choice.eps_m <= 0.15 and curves.eps_m.max() <= 0.15
+    assert "eps_K beyond is over 0.15 m" in choice.note
+
+
+def test_a_small_cluster_near_a_big_one_of_its_class_is_kept_a_far_one_is_not() -> None:
+    seat = grid_patch((0.0, 0.45), (0.0, 0.45), z=0.45, step=0.03)
+    leg = np.array([[0.02, 0.02, z] for z in np.arange(0.32, 0.40, 0.03)])  # 5 cm below it
+    far = leg + np.array([2.0, 0.0, 0.0])
+    cells = np.concatenate([seat, leg, far]).astype(np.float32)
+    cluster_of = np.r_[np.zeros(len(seat)), np.ones(len(leg)), np.full(len(far), 2)]
+    big = np.array([True, False, False])
+    kept = attached_clusters(cells, cluster_of.astype(np.int64), big, 0.15)
+    assert kept.tolist() == [False, True, False]
