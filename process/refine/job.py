@@ -98,6 +98,8 @@ def refinement_metrics(
             "normal": [float(v) for v in p.model[:3]],
             "offset_m": float(p.model[3]),
             "height_m": None if math.isnan(p.height_m) else p.height_m,
+            "network_says": LABEL_NAMES[p.network_label] if p.network_label else "none",
+            "kept_as_objects": p.kept_as_objects,
         }
         for p in result.planes.planes
     ]

@@ -30,6 +30,8 @@ class Plane:
     label: int  # 1 ceiling, 2 floor, 3 wall; 0 = not structural, stays in the object cloud
     removed: npt.NDArray[np.intp]  # the inliers taken out as structure (connected pieces)
     height_m: float  # mean height of the removed (else all) inliers along `up`; nan if unknown
+    network_label: int = 0  # the structure label the network gives most of it (0: none)
+    kept_as_objects: int = 0  # inliers of a wide object-labelled region, left to the objects
 
 
 @dataclass(frozen=True)
@@ -195,13 +197,14 @@ def _classify(
         label = Label.CEILING
     elif upright and (_is_wall(heights[kept], low, room) or said == Label.WALL):
         label = Label.WALL
+    flat = np.zeros(len(kept), bool)
     if label and labels is not None and cfg.plane_object_width_m > 0:
         # objects lying flat on the structure stay objects; label bleed onto it does not
         flat = wide_object_regions(
             plane_uv(points[kept], model), labels[kept], width_m=cfg.plane_object_width_m
         )
-        kept = kept[~flat]
-    return Plane(model, indices, label, kept if label else none, height)
+    removed = kept[~flat] if label else none
+    return Plane(model, indices, label, removed, height, said, int(flat.sum()))
 
 
 def _network_says(labels: npt.NDArray[np.uint8] | None, kept: npt.NDArray[np.intp]) -> int:

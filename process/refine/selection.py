@@ -15,7 +15,9 @@ points and generator 2, tests/helpers_refine_sim.py, at 63k / 63k / 179k), with 
 the refinement at its defaults: literal 0.973 0.982 0.929 0.891 0.918; plateau, tolerance 0:
 0.960 0.979 0.941 0.898 0.917; 0.1: 0.963 0.978 0.941 0.898 0.917; 0.25 (default): 0.964
 0.982 0.941 0.902 0.922. The rule matters little once clusters are grouped into objects and
-DBSCAN runs on voxel cells; those two steps took generator 2 from ~0.80 to ~0.92.
+DBSCAN runs on voxel cells; those two steps took generator 2 from ~0.80 to ~0.92. (Those
+figures predate the later defaults of issue 12: MinPts from the lower quartile, eps capped,
+labelled structure; their figures are in the README and benchmarks/bench_refine.py.)
 """
 
 from __future__ import annotations

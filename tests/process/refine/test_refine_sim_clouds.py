@@ -9,7 +9,7 @@ from helpers_refine_sim import SimFusedMap, SimScene, sim_fused_map, sim_scene
 from process.cloud import ply_bytes
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
-from process.refine.job import refine_and_log
+from process.refine.job import refine_and_log, refinement_metrics
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +72,10 @@ def test_a_fused_map_gains_and_its_floor_is_found_though_no_wall_rises_above_it(
     assert result.planes.up_source == "labelled planes"
     assert any(p.label == 2 for p in result.planes.planes)  # the floor, from the labels
     assert len(result.regrown) > 0
+    section = refinement_metrics(result, gt_cloud=None)
+    assert section["up_source"] == "labelled planes"
+    floors = [p for p in section["planes"] if p["label"] == "floor"]
+    assert floors and all(p["network_says"] == "floor" for p in floors)
 
 
 def test_metrics_say_which_rule_chose_k_and_why(room: SimScene) -> None:
