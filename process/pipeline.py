@@ -33,6 +33,7 @@ from process.config import ReplayConfig, to_toml
 from process.depth import DepthProcessor
 from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
+from process.fusion.schedule import SegmentationSchedule
 from process.odometry.odometry import Odometry, TrackResult
 from process.preview import write_preview
 from process.streaming import Worker
@@ -64,6 +65,7 @@ class _Keyframe:
     depth_m: npt.NDArray[np.float32]  # (H, W) registered to colour
     keyframe_id: int
     world_from_camera: npt.NDArray[np.float64]  # (4, 4) when tracked
+    segment: bool  # False: geometry only (SegmentationSchedule)
 
 
 class ReplayPipeline:
@@ -98,6 +100,7 @@ class ReplayPipeline:
         self._frames = 0
         self._odometry: Odometry | None = None
         self._segmenter: Segmenter | None = None
+        self._schedule = SegmentationSchedule(cfg.segmentation.min_new_share)
         self._seg_stats = _SegStats()
         self._seg_model: dict[str, Any] = {}  # which model, why, its load time
         self._fusion = KeyframeFusion(cfg.fusion) if "fusion" in stages else None
@@ -209,7 +212,17 @@ class ReplayPipeline:
             track = self._odometry.track(frame, depth_m)
         self._log_frame(frame, depth_m, track)
         if track.is_keyframe and self._segmenter is not None:
-            kf = _Keyframe(frame, depth_m, track.state.keyframe_id, track.world_from_camera)
+            kf = _Keyframe(
+                frame,
+                depth_m,
+                track.state.keyframe_id,
+                track.world_from_camera,
+                segment=self._schedule.due(
+                    depth_m,
+                    intrinsics=frame.color_intrinsics,
+                    world_from_camera=track.world_from_camera,
+                ),
+            )
             # Following a live capture, a keyframe the segmentation has no room for is left out
             # of the map rather than letting the whole job fall behind the camera; offline,
             # every keyframe is segmented (the frame loop waits).
@@ -261,21 +274,22 @@ class ReplayPipeline:
         assert self._segmenter is not None  # keyframes are queued only with a segmenter
         frame = kf.frame
         self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-        with self.clock("segmentation"):
-            seg = self._segmenter.segment(frame.color)
-        self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
-        gt = frame.ground_truth
-        if gt is not None and gt.labels is not None:
-            self._seg_stats.add(seg.labels, gt.labels)
-        self._seg_stats.keyframes += 1
+        if kf.segment:
+            with self.clock("segmentation"):
+                seg = self._segmenter.segment(frame.color)
+            self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
+            gt = frame.ground_truth
+            if gt is not None and gt.labels is not None:
+                self._seg_stats.add(seg.labels, gt.labels)
+            self._seg_stats.keyframes += 1
+            labels, confidence = seg.labels, seg.confidence
+        else:  # geometry only: no label votes
+            self._seg_stats.geometry_only += 1
+            labels = np.zeros(frame.color.shape[:2], np.uint8)
+            confidence = np.zeros(frame.color.shape[:2], np.float32)
         if self._fusion is not None:
             labelled = LabelledKeyframe(
-                kf.keyframe_id,
-                frame.color,
-                kf.depth_m,
-                seg.labels,
-                seg.confidence,
-                frame.color_intrinsics,
+                kf.keyframe_id, frame.color, kf.depth_m, labels, confidence, frame.color_intrinsics
             )
             with self.clock("fusion"):
                 self._fusion.add(labelled, world_from_camera=kf.world_from_camera)
@@ -458,6 +472,7 @@ class _SegStats:
 
     def __init__(self) -> None:
         self.keyframes = 0
+        self.geometry_only = 0  # keyframes the schedule left unsegmented
         self.confusion = np.zeros((len(LABEL_NAMES), len(LABEL_NAMES)), np.int64)
 
     def add(self, pred: npt.NDArray[np.uint8], gt: npt.NDArray[np.uint8]) -> None:
@@ -466,6 +481,7 @@ class _SegStats:
     def summary(self, seconds: float) -> dict[str, Any]:
         out: dict[str, Any] = {
             "keyframes": self.keyframes,
+            "keyframes_geometry_only": self.geometry_only,
             "ms_per_keyframe": round(1000 * seconds / self.keyframes, 2)
             if self.keyframes
             else None,

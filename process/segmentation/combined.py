@@ -49,7 +49,7 @@ def combine(
     `voc` is resized to `ade`'s size first if they differ.
     """
     if voc.shape[2:] != ade.shape[2:]:
-        voc = F.interpolate(voc, size=ade.shape[2:], mode="bilinear", align_corners=False)
+        voc = F.interpolate(voc, size=ade.shape[2:], mode="bilinear", align_corners=True)
     ade = ade.clone()
     for label in NEED_SUPPORT:
         ade[:, label] *= voc[:, label] >= support
@@ -64,6 +64,8 @@ def combine(
 
 class CombinedRuntime:
     """Run the ADE20K and the VOC .tflite networks and combine their labels per pixel."""
+
+    align_corners = True  # both are TfliteRuntimes
 
     def __init__(
         self,

@@ -149,7 +149,12 @@ class Segmenter:
         ).astype(np.uint8, copy=False)
         probs = self.runtime(batch)
         if probs.shape[2:] != (h, w):
-            probs = F.interpolate(probs.float(), size=(h, w), mode="bilinear", align_corners=False)
+            probs = F.interpolate(
+                probs.float(),
+                size=(h, w),
+                mode="bilinear",
+                align_corners=self.runtime.align_corners,
+            )
         confidence, labels = probs.max(dim=1)
         labels_np = labels.to(torch.uint8).cpu().numpy()
         conf_np = confidence.clamp_(0.0, 1.0).float().cpu().numpy()

@@ -22,6 +22,7 @@ from process.segmentation.models import (
     is_simulated,
     shipped,
 )
+from process.segmentation.tflite_graph import cut_graph, logits_end
 from process.segmentation.tflite_runtime import TfliteRuntime, label_map_for
 from process.segmentation.weights import SAMPLES_CHECKPOINT
 
@@ -76,11 +77,48 @@ def test_float_ade20k_and_int8_voc_models_load_with_their_class_counts() -> None
     image = np.random.default_rng(0).integers(0, 255, (1, 513, 513, 3), dtype=np.uint8)
     for runtime in (ade, voc):
         probs = runtime(image)
-        assert probs.shape == (1, NUM_LABELS, 257, 257)
-        assert torch.allclose(probs.sum(dim=1), torch.ones(1, 257, 257), atol=1e-4)
+        assert probs.shape == (1, NUM_LABELS, 129, 129)
+        assert torch.allclose(probs.sum(dim=1), torch.ones(1, 129, 129), atol=1e-4)
     assert float(voc(image)[:, 1:4].max()) == 0.0  # VOC never says ceiling, floor or wall
     with pytest.raises(ModelError, match="151 classes but the label map has 21"):
         TfliteRuntime(ADE20K_TFLITE, class_to_label=VOC_TO_LABEL)
+
+
+def test_cut_graphs_label_every_pixel_as_the_published_models_do() -> None:
+    """The logits cut off before the trailing resize/ArgMax give the whole model's argmax."""
+    from ai_edge_litert.interpreter import Interpreter
+
+    image = np.random.default_rng(1).integers(0, 255, (1, 513, 513, 3), dtype=np.uint8)
+    image[:, 100:400, 150:350] = (200, 40, 40)  # a block, so that not every pixel is noise
+    for path in (ADE20K_TFLITE, VOC_TFLITE):
+        whole = Interpreter(model_path=str(path), num_threads=1)
+        whole.allocate_tensors()
+        inp = whole.get_input_details()[0]
+        x = image if inp["dtype"] == np.uint8 else image.astype(np.float32) / 127.5 - 1.0
+        whole.set_tensor(inp["index"], x)
+        whole.invoke()
+        out = whole.get_tensor(whole.get_output_details()[0]["index"])
+        expected = out.argmax(-1) if out.ndim == 4 else out  # ADE20K: scores, VOC: ArgMax
+        cut = TfliteRuntime(path, threads=1).interp  # its output: the class scores
+        cut.set_tensor(inp["index"], x)
+        cut.invoke()
+        logits = torch.from_numpy(cut.get_tensor(cut.get_output_details()[0]["index"]) * 1.0)
+        # class scores, resized to 513 corner-aligned as DeepLab does, argmax-ed
+        up = torch.nn.functional.interpolate(
+            logits.permute(0, 3, 1, 2), size=(513, 513), mode="bilinear", align_corners=True
+        )
+        assert (up.argmax(1).numpy() == expected).mean() > 0.995
+
+
+def test_a_graph_that_cannot_be_cut_is_refused_in_one_line() -> None:
+    model = ADE20K_TFLITE.read_bytes()
+    with pytest.raises(ValueError, match="cannot keep 0 operators"):
+        cut_graph(model, output_tensor=0, n_operators=0)
+    ops: list[dict[str, object]] = [{"op_name": "CONV_2D", "inputs": [1], "outputs": [2]}]
+    assert logits_end(ops, 2) == (2, 1)  # nothing to cut
+    ops += [{"op_name": "RESIZE_BILINEAR", "inputs": [2, 7], "outputs": [3]}]
+    ops += [{"op_name": "ARG_MAX", "inputs": [3, 8], "outputs": [4]}]
+    assert logits_end(ops, 4) == (2, 1)
 
 
 def test_ade20k_finds_the_structure_of_a_simulated_room(sim_recording: Path) -> None:
