@@ -105,9 +105,9 @@ class RefineConfig:
                 "refinement.plane_min_points must be 0 (relative to the cloud) or >= 3, "
                 f"got {self.plane_min_points}"
             )
-        if self.min_pts_statistic not in ("mean", "lower_quartile"):
+        if self.min_pts_statistic not in ("mean", "median", "lower_quartile"):
             raise ConfigError(
-                "refinement.min_pts_statistic must be mean or lower_quartile, "
+                "refinement.min_pts_statistic must be mean, median or lower_quartile, "
                 f"got {self.min_pts_statistic!r}"
             )
         if self.dbscan_rule not in RULES:

@@ -31,6 +31,7 @@ from process.refine.selection import STABLE_RUN, plateau_choice, stable_choice, 
 logger = logging.getLogger(__name__)
 
 MIN_PTS_FLOOR = 4  # the paper: MinPts >= 4 for 3-D points
+QUANTILES = {"median": 0.5, "lower_quartile": 0.25}  # MinPts statistics other than the mean
 
 
 @dataclass(frozen=True)
@@ -116,8 +117,8 @@ class NeighbourTable:
         fifth of its pixels) all noise; "lower_quartile" lets three quarters be core.
         Rounded half up.
         """
-        if statistic == "lower_quartile":
-            mean = np.quantile(self.counts, 0.25, axis=1)
+        if statistic in QUANTILES:
+            mean = np.quantile(self.counts, QUANTILES[statistic], axis=1)
         else:
             mean = self.counts.mean(axis=1)
         min_pts: npt.NDArray[np.int64] = np.maximum(MIN_PTS_FLOOR, np.floor(mean + 0.5)).astype(
