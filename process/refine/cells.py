@@ -84,3 +84,36 @@ def attached_clusters(
         touch = np.all((low[i] <= b_high) & (high[i] >= b_low), axis=1)
         out[i] = bool(touch.any())
     return out
+
+
+def sparse_inside_others(
+    points: npt.NDArray[np.float32],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    sparse: npt.NDArray[np.int64],
+) -> npt.NDArray[np.int64]:
+    """Return the sparse clusters whose box overlaps a dense cluster's box of another class.
+
+    A sparse cluster (no point dense enough at the paper's MinPts) on its own is an object the
+    network labelled in few views; inside an object of another class, it is the network's
+    confusion at that object's edge, and gives way (regrowth relabels it).
+    """
+    ids = np.unique(clusters[clusters > 0])
+    member = clusters > 0
+    row = np.searchsorted(ids, clusters[member])
+    xyz = points[member].astype(np.float64)
+    low = np.full((len(ids), 3), np.inf)
+    high = np.full((len(ids), 3), -np.inf)
+    np.minimum.at(low, row, xyz)
+    np.maximum.at(high, row, xyz)
+    label = np.zeros(len(ids), np.uint8)
+    label[row] = labels[member]
+    is_sparse = np.isin(ids, sparse)
+    dense = ~is_sparse
+    out = []
+    for i in np.flatnonzero(is_sparse):
+        other = dense & (label != label[i])
+        overlap = np.all((low[i] <= high[other]) & (high[i] >= low[other]), axis=1)
+        if overlap.any():
+            out.append(int(ids[i]))
+    return np.array(out, np.int64)

@@ -47,6 +47,8 @@ class RefineConfig:
     full_curves: bool = False  # run DBSCAN for every K, not only until the stable run ends
     regrowth: bool = True  # recover unlabelled points around each cluster
     object_gap_m: float = 0.15  # regrowth: same-class clusters this close are one object
+    sparse_clusters_yield: bool = True  # a cluster sparse at the paper's MinPts goes to 0
+    # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     seed: int = 0  # RANSAC sampling
@@ -66,6 +68,7 @@ class RefineConfig:
             "min_pts_statistic": "mean",
             "max_eps_m": 0.0,
             "attach_small_clusters": False,
+            "sparse_clusters_yield": False,
             "regrow_own_class_first": False,
             "plane_object_width_m": 0.0,
         }

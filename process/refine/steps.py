@@ -13,7 +13,7 @@ import numpy.typing as npt
 from capture.recording import NUM_LABELS, OBJECT_LABELS
 from process.cloud import LabelledCloud
 from process.errors import StageError
-from process.refine.cells import attached_clusters, capped_cells
+from process.refine.cells import attached_clusters, capped_cells, sparse_inside_others
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.outliers import sor_inliers
@@ -158,6 +158,7 @@ def _correct(
     shared = _shared_estimate(points, labels, cfg) if cfg.dbscan_method == 1 else None
     per_class: dict[int, ClassClustering] = {}
     next_id = 1
+    sparse_ids: list[int] = []
     for label in (int(c) for c in np.unique(labels) if c > 0):
         members = np.flatnonzero(labels == label)
         cells, cell_of, voxel_m = capped_cells(points[members], cfg.cluster_voxel_m, cfg.max_cells)
@@ -165,7 +166,7 @@ def _correct(
             logger.info(
                 "class %d: %d points, DBSCAN on %.3f m voxels", label, len(members), voxel_m
             )
-        entry, cluster_of = _cluster_class(label, cells, cfg, shared)
+        entry, cluster_of, dense = _cluster_class(label, cells, cfg, shared)
         sizes = np.bincount(cluster_of[cluster_of >= 0], minlength=1)
         min_size = cfg.min_cluster_points if entry.choice is None else entry.choice.min_size
         keep = sizes >= min_size
@@ -177,10 +178,16 @@ def _correct(
         ids = new_id[cluster_of + 1][cell_of]  # each point takes its cell's cluster
         out_clusters[members] = ids
         out_labels[members[ids > 0]] = label
+        is_dense = np.bincount(cluster_of[dense & (cluster_of >= 0)], minlength=len(sizes)) > 0
+        sparse_ids.extend(int(new_id[c + 1]) for c in big if not is_dense[c])
         next_id += len(big)
         per_class[label] = replace(
             entry, points=len(members), clusters=len(big), relabelled=int((ids == 0).sum())
         )
+    if cfg.sparse_clusters_yield and sparse_ids:
+        drop = sparse_inside_others(points, out_labels, out_clusters, np.array(sparse_ids))
+        gone = np.isin(out_clusters, drop)
+        out_labels[gone], out_clusters[gone] = 0, 0
     return out_labels, out_clusters, per_class, shared
 
 
@@ -204,28 +211,41 @@ def _sor(points: npt.NDArray[np.float32], cfg: RefineConfig) -> npt.NDArray[np.b
 
 def _cluster_class(
     label: int, points: npt.NDArray[np.float32], cfg: RefineConfig, shared: ClassClustering | None
-) -> tuple[ClassClustering, npt.NDArray[np.int64]]:
-    """Return the clustering entry of one class and its DBSCAN labels (all -1: too small)."""
+) -> tuple[ClassClustering, npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+    """Return one class's clustering entry, DBSCAN labels (all -1: too small), dense cells.
+
+    Dense: core at the paper's MinPts (the mean count) too, at the chosen eps.
+    """
     entry = ClassClustering(label, len(points), None, None, 0, 0, 0.0, 0.0)
     noise = np.full(len(points), -1, np.int64)
+    dense = np.ones(len(points), bool)
     if len(points) < max(cfg.min_cluster_points, 2):
-        return entry, noise  # no cluster of this class can reach the size threshold
+        return entry, noise, dense  # no cluster of this class can reach the size threshold
     t0 = time.perf_counter()
     if shared is None:
         table, curves, choice = estimate_parameters(points, **_rule(cfg))
         t1 = time.perf_counter()
         cluster_of = table.labels(choice.k - 1, choice.min_pts)
+        dense = table.counts[choice.k - 1] >= table.min_pts("mean")[choice.k - 1]
         seconds = time.perf_counter() - t1
-        return replace(
-            entry, curves=curves, choice=choice, seconds_params=t1 - t0, seconds_cluster=seconds
-        ), cluster_of
+        return (
+            replace(
+                entry, curves=curves, choice=choice, seconds_params=t1 - t0, seconds_cluster=seconds
+            ),
+            cluster_of,
+            dense,
+        )
     if shared.choice is None:
-        return entry, noise
+        return entry, noise, dense
     choice = shared.choice
     cluster_of = dbscan(
         points, eps_m=choice.eps_m, min_pts=choice.min_pts, k_query=query_size(cfg.k_max)
     )
-    return replace(entry, choice=choice, seconds_cluster=time.perf_counter() - t0), cluster_of
+    return (
+        replace(entry, choice=choice, seconds_cluster=time.perf_counter() - t0),
+        cluster_of,
+        dense,
+    )
 
 
 def _shared_estimate(

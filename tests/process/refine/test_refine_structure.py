@@ -9,7 +9,7 @@ from helpers_refine import grid_patch
 
 from capture.recording import Label
 from process.refine import RefineConfig
-from process.refine.cells import attached_clusters
+from process.refine.cells import attached_clusters, sparse_inside_others
 from process.refine.dbscan import estimate_parameters
 from process.refine.plane_grid import wide_object_regions
 from process.refine.planes import segment_planes
@@ -107,3 +107,15 @@ def test_a_small_cluster_near_a_big_one_of_its_class_is_kept_a_far_one_is_not() 
     big = np.array([True, False, False])
     kept = attached_clusters(cells, cluster_of.astype(np.int64), big, 0.15)
     assert kept.tolist() == [False, True, False]
+
+
+def test_a_sparse_cluster_inside_another_class_object_gives_way_one_on_its_own_stays() -> None:
+    table = grid_patch((0.0, 1.2), (0.0, 0.6), z=0.75)
+    edge = grid_patch((1.0, 1.2), (0.0, 0.2), z=0.75)  # the table's corner, called "chair"
+    alone = grid_patch((3.0, 3.4), (0.0, 0.4), z=0.45)  # a chair seen rarely, on its own
+    points = np.concatenate([table, edge, alone]).astype(np.float32)
+    labels = np.r_[np.full(len(table), 4), np.full(len(edge) + len(alone), 5)].astype(np.uint8)
+    clusters = np.r_[np.full(len(table), 1), np.full(len(edge), 2), np.full(len(alone), 3)]
+    sparse = np.array([2, 3])  # no point dense enough at the paper's MinPts
+    drop = sparse_inside_others(points, labels, clusters.astype(np.int32), sparse)
+    assert drop.tolist() == [2]
