@@ -4,7 +4,9 @@ ADE20K's DeepLab knows the room's shell (ceiling, floor, wall) and much furnitur
 knows chairs, tables, monitors, people, plants and sofas cleanly but nothing else. Each network
 sees the image as it works best on real rooms (measured on hand-boxed TUM fr1_rpy desks and
 monitors, tests/process/segmentation/test_seg_combined.py): ADE20K letterboxed, aspect kept and
-padded, as DeepLab's ADE20K evaluation feeds it (desk surfaces: 47 % table, 23 % stretched);
+padded grey, as DeepLab's own evaluation feeds it (hand-boxed desk surfaces: 47 % table, 23 %
+stretched; a smaller image, 3/4 of the input, labels near desks better still but far walls worse,
+and the TUM map's table and monitor points fell from 11 % to 8 %);
 VOC stretched to its square input (monitors: 43 % tv monitor, 12 % letterboxed).
 Per pixel, with each network's label probabilities (its class softmax summed into RECORDING.md
 labels):
@@ -43,7 +45,6 @@ from process.segmentation.tflite_runtime import OUTPUT_STRIDE, TfliteRuntime
 MIN_CONFIDENCE: Final = 0.5
 SUPPORT: Final = 0.1
 HINT: Final = 0.3
-ADE20K_FILL: Final = 0.75  # ADE20K sees the image's long side over 3/4 of its input
 NEED_SUPPORT: Final = (6, 7, 8)  # person, plant, sofa
 CLUTTER: Final = 10
 _FIRST_OBJECT: Final = min(OBJECT_LABELS)
@@ -165,6 +166,6 @@ class CombinedRuntime:
         square = (self.side, self.side)
         interp = cv2.INTER_AREA if width * height > self.side**2 else cv2.INTER_LINEAR
         stretched = np.stack([cv2.resize(im, square, interpolation=interp) for im in batch])
-        boxed = np.stack([letterbox(im, self.side, ADE20K_FILL) for im in batch])
-        ade = unletterbox(self.ade20k(boxed), width, height, self.side, ADE20K_FILL)
+        boxed = np.stack([letterbox(im, self.side) for im in batch])
+        ade = unletterbox(self.ade20k(boxed), width, height, self.side)
         return combine(ade, self.voc(stretched), min_confidence=self.min_confidence)
