@@ -36,7 +36,7 @@ from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
 from process.fusion.schedule import SegmentationSchedule
 from process.odometry.odometry import Odometry, TrackResult
 from process.preview import write_preview
-from process.streaming import Worker
+from process.streaming import Worker, prefetch
 from process.trajectory import Trajectory, ate_rmse, path_length, rpe, write_tum
 from viz.background import BackgroundLogger
 from viz.layout import STAGE_FUSED
@@ -185,14 +185,18 @@ class ReplayPipeline:
         return Trajectory.of(gt_stamps, gt_poses)
 
     def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
-        """Yield the recording's frames, timing the reading and decoding as its own stage."""
+        """Yield the recording's frames, read and decoded ahead on a thread (stage "read")."""
+        for frame in prefetch(self._read(rec), name="read", stop=self.stop):
+            self._frames += 1
+            yield frame
+
+    def _read(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
         frames = rec.frames()
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
-            self._frames += 1
             yield frame
 
     def _track(
