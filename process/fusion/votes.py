@@ -42,6 +42,9 @@ class FusionConfig:
     # further from its median depth than this many robust standard deviations (0 = off) ...
     spill_mad_factor: float = 3.0
     spill_min_margin_m: float = 0.25  # ... and than this
+    # a surface point in a voxel without label votes takes the nearest voted voxel's label this
+    # many voxels away at most (8 cm: the cells by which keyframes are chosen for segmentation)
+    label_reach_voxels: float = 4.0
 
     def __post_init__(self) -> None:
         if not 0.001 <= self.voxel_size_m <= 1.0:
@@ -67,6 +70,10 @@ class FusionConfig:
             raise ConfigError(
                 "fusion.spill_mad_factor and spill_min_margin_m must be in 0..100, got "
                 f"{self.spill_mad_factor} and {self.spill_min_margin_m}"
+            )
+        if not 0.0 <= self.label_reach_voxels <= 64.0:
+            raise ConfigError(
+                f"fusion.label_reach_voxels must be in 0..64, got {self.label_reach_voxels}"
             )
 
 
@@ -250,8 +257,10 @@ class Fusion:
 
         With the TSDF surface the points are its zero crossing, each labelled by the vote voxel
         it lies in (or the nearest one within two voxels; points with none are dropped); else
-        one point per voxel at the mean of its samples. A voxel nobody voted for confidently
-        (all weights 0) stays unlabelled.
+        one point per voxel at the mean of its samples. A TSDF point whose voxel nobody voted
+        for confidently takes the label of the nearest voxel that was voted for within
+        `label_reach_voxels` (keyframes that were not segmented add geometry but no votes);
+        beyond that it stays unlabelled.
         """
         n = self._size
         count = self._count[:n, None]
@@ -265,7 +274,31 @@ class Fusion:
         points = self._tsdf.points(min_views=min(self.cfg.min_views, max(self.frames, 1)))
         slots = self._slots_of(points, centroids)
         keep = slots >= 0
-        return LabelledCloud(points[keep], colors[slots[keep]], labels[slots[keep]])
+        points, slots = points[keep], slots[keep]
+        return LabelledCloud(points, colors[slots], self._reach(points, slots, labels, votes))
+
+    def _reach(
+        self,
+        points: npt.NDArray[np.float32],
+        slots: npt.NDArray[np.int64],
+        labels: npt.NDArray[np.uint8],
+        votes: npt.NDArray[np.float32],
+    ) -> npt.NDArray[np.uint8]:
+        """Return the points' labels: their voxel's, or the nearest voted voxel's within reach."""
+        voted = votes.max(axis=1) > 0
+        out = labels[slots]
+        lonely = ~voted[slots]
+        reach = self.cfg.label_reach_voxels * self.cfg.voxel_size_m
+        if reach <= 0 or not lonely.any() or not voted.any():
+            return out
+        from scipy.spatial import cKDTree
+
+        rows = np.flatnonzero(voted)
+        centroids = (self._sum_xyz[rows] / self._count[rows, None]).astype(np.float32)
+        distance, nearest = cKDTree(centroids).query(points[lonely], distance_upper_bound=reach)
+        near = np.isfinite(distance)
+        out[np.flatnonzero(lonely)[near]] = labels[rows[nearest[near]]]
+        return out
 
     def _slots_of(
         self, points: npt.NDArray[np.float32], centroids: npt.NDArray[np.float32]
