@@ -216,16 +216,17 @@ class ReplayPipeline:
             track = self._odometry.track(frame, depth_m)
         self._log_frame(frame, depth_m, track)
         if track.is_keyframe and self._segmenter is not None:
+            cells = self._schedule.new_cells(
+                depth_m,
+                intrinsics=frame.color_intrinsics,
+                world_from_camera=track.world_from_camera,
+            )
             kf = _Keyframe(
                 frame,
                 depth_m,
                 track.state.keyframe_id,
                 track.world_from_camera,
-                segment=self._schedule.due(
-                    depth_m,
-                    intrinsics=frame.color_intrinsics,
-                    world_from_camera=track.world_from_camera,
-                ),
+                segment=cells is not None,
             )
             # Following a live capture, a keyframe the segmentation has no room for is left out
             # of the map rather than letting the whole job fall behind the camera; offline,
@@ -235,6 +236,8 @@ class ReplayPipeline:
             elif not self._keyframes.offer(kf):
                 self._keyframes_skipped += 1
                 return
+            if cells is not None:  # what it sees is labelled now: later keyframes need not be
+                self._schedule.cover(cells)
             self._keyframe_stamps[kf.keyframe_id] = frame.stamp_ns
 
     def _log_frame(
