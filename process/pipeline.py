@@ -36,7 +36,7 @@ from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
 from process.fusion.schedule import SegmentationSchedule
 from process.odometry.odometry import Odometry, TrackResult
 from process.preview import write_preview
-from process.streaming import Worker
+from process.streaming import Worker, prefetch
 from process.trajectory import Trajectory, ate_rmse, path_length, rpe, write_tum
 from viz.background import BackgroundLogger
 from viz.layout import STAGE_FUSED
@@ -185,14 +185,18 @@ class ReplayPipeline:
         return Trajectory.of(gt_stamps, gt_poses)
 
     def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
-        """Yield the recording's frames, timing the reading and decoding as its own stage."""
+        """Yield the recording's frames, read and decoded ahead on a thread (stage "read")."""
+        for frame in prefetch(self._read(rec), name="read", stop=self.stop):
+            self._frames += 1
+            yield frame
+
+    def _read(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
         frames = rec.frames()
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
-            self._frames += 1
             yield frame
 
     def _track(
@@ -212,16 +216,17 @@ class ReplayPipeline:
             track = self._odometry.track(frame, depth_m)
         self._log_frame(frame, depth_m, track)
         if track.is_keyframe and self._segmenter is not None:
+            cells = self._schedule.new_cells(
+                depth_m,
+                intrinsics=frame.color_intrinsics,
+                world_from_camera=track.world_from_camera,
+            )
             kf = _Keyframe(
                 frame,
                 depth_m,
                 track.state.keyframe_id,
                 track.world_from_camera,
-                segment=self._schedule.due(
-                    depth_m,
-                    intrinsics=frame.color_intrinsics,
-                    world_from_camera=track.world_from_camera,
-                ),
+                segment=cells is not None,
             )
             # Following a live capture, a keyframe the segmentation has no room for is left out
             # of the map rather than letting the whole job fall behind the camera; offline,
@@ -231,6 +236,8 @@ class ReplayPipeline:
             elif not self._keyframes.offer(kf):
                 self._keyframes_skipped += 1
                 return
+            if cells is not None:  # what it sees is labelled now: later keyframes need not be
+                self._schedule.cover(cells)
             self._keyframe_stamps[kf.keyframe_id] = frame.stamp_ns
 
     def _log_frame(
@@ -336,8 +343,11 @@ class ReplayPipeline:
         assert self._fusion is not None
         pose_at = dict(zip(trajectory.stamps_ns.tolist(), trajectory.poses, strict=True))
         poses = {kf: pose_at[stamp] for kf, stamp in self._keyframe_stamps.items()}
-        with self.clock("fusion"):
-            cloud = self._fusion.cloud(poses)
+        wall0, cpu0 = time.perf_counter(), time.thread_time()
+        cloud = self._fusion.cloud(poses)
+        # a map fused again at the final poses is a stage of its own: it runs after the frames
+        stage = "refusion" if self._fusion.refused else "fusion"
+        self.clock.add(stage, time.perf_counter() - wall0, time.thread_time() - cpu0)
         if self._fusion.refused:
             self.viz.log_text("loop closures moved keyframes: the map was fused again")
         self._write_cloud(outputs.MAP_FUSED, cloud)
@@ -439,12 +449,20 @@ class ReplayPipeline:
         self.result.written.append(path)
 
 
-_ONCE = frozenset({"refinement"})  # stages that run once per job: no frames/s
+_ONCE = frozenset({"refinement", "refusion"})  # stages that run once per job: no frames/s
 
 
 def _limit_threads() -> None:
-    """Leave the second core to the keyframe and logging threads: OpenCV's pool would take it."""
+    """Leave the second core to the keyframe and logging threads: OpenCV's pool would take it.
+
+    BLAS gets one thread: the pipeline's matrix products are small (points times a 3x3
+    rotation), and a second OpenBLAS thread spins after each one (5.5 of 41 CPU seconds on
+    TUM fr1_rpy).
+    """
+    from threadpoolctl import threadpool_limits
+
     cv2.setNumThreads(max(1, (os.cpu_count() or 2) - 1))
+    threadpool_limits(limits=1, user_api="blas")
 
 
 class _StageClock:

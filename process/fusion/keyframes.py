@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Mapping
+from collections import deque
+from collections.abc import Iterator, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Final
@@ -32,6 +34,7 @@ from process.fusion.votes import Fusion, FusionConfig
 _MOVED_ROTATION_RAD: Final = float(np.radians(0.25))
 _JPEG: Final = [cv2.IMWRITE_JPEG_QUALITY, 92]
 _PNG: Final = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+_LOAD_AHEAD: Final = 4  # keyframes decoded ahead of the one being fused again
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,8 +76,8 @@ class KeyframeFusion:
             _moved(at, poses[kf], self.cfg.voxel_size_m / 2) for kf, at in self._fused_at.items()
         ):
             self.fusion = Fusion(replace(self.cfg, pixel_stride=1))
-            for kf in sorted(self._fused_at):
-                self._integrate(self._load(kf), poses[kf])
+            for keyframe in self._loaded(sorted(self._fused_at)):
+                self._integrate(keyframe, poses[keyframe.keyframe_id])
             self.refused = True
         return self.fusion.cloud()
 
@@ -105,6 +108,17 @@ class KeyframeFusion:
             if not ok:
                 raise StageError(f"could not encode keyframe {kf.keyframe_id}'s {suffix}")
             (self._folder / f"{kf.keyframe_id}_{suffix}").write_bytes(data.tobytes())
+
+    def _loaded(self, ids: list[int]) -> Iterator[LabelledKeyframe]:
+        """Yield the stored keyframes in order, decoding the next ones on another thread."""
+        with ThreadPoolExecutor(1, thread_name_prefix="semreplay-keyframe-load") as pool:
+            ahead: deque[Future[LabelledKeyframe]] = deque()
+            for kf in ids:
+                ahead.append(pool.submit(self._load, kf))
+                if len(ahead) > _LOAD_AHEAD:
+                    yield ahead.popleft().result()
+            while ahead:
+                yield ahead.popleft().result()
 
     def _load(self, kf: int) -> LabelledKeyframe:
         def read(suffix: str, flags: int) -> npt.NDArray[np.generic]:

@@ -31,6 +31,31 @@ class SegmentationSchedule:
         self.min_new_share = min_new_share  # [segmentation] min_new_share; 0 = every keyframe
         self._covered = np.zeros(0, np.int64)  # sorted cell keys seen by segmented keyframes
 
+    def new_cells(
+        self,
+        depth_m: npt.NDArray[np.float32],
+        *,
+        intrinsics: Intrinsics,
+        world_from_camera: npt.NDArray[np.float64],
+    ) -> npt.NDArray[np.int64] | None:
+        """Return the keyframe's coverage cells if it is due for segmentation, else None.
+
+        Pass them to `cover` once the keyframe is on its way to the segmentation.
+        """
+        cells = np.unique(_cells(depth_m, intrinsics, world_from_camera))
+        if self.min_new_share <= 0.0:
+            return cells
+        if len(cells) == 0:  # no depth: nothing to label
+            return None
+        where = np.searchsorted(self._covered, cells)
+        seen = where < len(self._covered)
+        seen[seen] = self._covered[where[seen]] == cells[seen]
+        return cells if 1.0 - float(seen.mean()) >= self.min_new_share else None
+
+    def cover(self, cells: npt.NDArray[np.int64]) -> None:
+        """Count these cells as seen by a segmented keyframe."""
+        self._covered = np.union1d(self._covered, cells)
+
     def due(
         self,
         depth_m: npt.NDArray[np.float32],
@@ -38,19 +63,11 @@ class SegmentationSchedule:
         intrinsics: Intrinsics,
         world_from_camera: npt.NDArray[np.float64],
     ) -> bool:
-        """Return whether this keyframe is to be segmented (and count its cells covered if so)."""
-        if self.min_new_share <= 0.0:
-            return True
-        cells = np.unique(_cells(depth_m, intrinsics, world_from_camera))
-        if len(cells) == 0:  # no depth: nothing to label
-            return False
-        where = np.searchsorted(self._covered, cells)
-        seen = where < len(self._covered)
-        seen[seen] = self._covered[where[seen]] == cells[seen]
-        if 1.0 - float(seen.mean()) < self.min_new_share:
-            return False
-        self._covered = np.union1d(self._covered, cells)
-        return True
+        """Return whether this keyframe is due, and count its cells covered if so."""
+        cells = self.new_cells(depth_m, intrinsics=intrinsics, world_from_camera=world_from_camera)
+        if cells is not None:
+            self.cover(cells)
+        return cells is not None
 
 
 def _cells(

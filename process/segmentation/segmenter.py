@@ -60,7 +60,7 @@ class Segmenter:
             if cfg.backend != "torch"
             else str(pick_device(device if device != "auto" else cfg.device))
         )
-        self.short_side_px = 0  # 0: the runtime fixes the input size
+        self.short_side_px = 0  # 0: the runtime fixes or fits the input size
         self.checkpoint_info: dict[str, object] = {}
         self.runtime = self._make_runtime()
         logger.info("segmentation: %s on %s (%s)", choice.name, cfg.backend, self.device)
@@ -110,6 +110,8 @@ class Segmenter:
         """Return the (width, height) at which an image of this size goes through the network."""
         if self.runtime.fixed_input_size is not None:
             return self.runtime.fixed_input_size
+        if not self.short_side_px:  # the runtime fits each image to its networks itself
+            return width, height
         scale = self.short_side_px / min(height, width)
         return max(16, round(width * scale)), max(16, round(height * scale))
 

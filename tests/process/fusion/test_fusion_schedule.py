@@ -44,6 +44,16 @@ def test_a_keyframe_is_segmented_when_it_sees_enough_new_surface() -> None:
     assert all(every.due(WALL, intrinsics=K, world_from_camera=_turned(0.0)) for _ in range(3))
 
 
+def test_a_due_keyframe_that_was_left_out_leaves_its_view_uncovered() -> None:
+    schedule = SegmentationSchedule(0.1)
+    first = schedule.new_cells(WALL, intrinsics=K, world_from_camera=_turned(0.0))
+    assert first is not None  # due, but (following) the segmentation had no room for it
+    again = schedule.new_cells(WALL, intrinsics=K, world_from_camera=_turned(0.0))
+    assert again is not None and np.array_equal(first, again)
+    schedule.cover(again)
+    assert schedule.new_cells(WALL, intrinsics=K, world_from_camera=_turned(0.0)) is None
+
+
 def _keyframe(kf: int, yaw_deg: float, label: int, confidence: float) -> LabelledKeyframe:
     shape = (K.height, K.width)
     return LabelledKeyframe(

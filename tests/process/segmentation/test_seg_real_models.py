@@ -13,7 +13,6 @@ from capture.recording import NUM_LABELS, VOC_TO_LABEL, RecordingReader
 from process.errors import ConfigError, ModelError
 from process.evaluate import confusion_iou, confusion_matrix
 from process.segmentation import SegmentationConfig, Segmenter, ade20k
-from process.segmentation.combined import combine
 from process.segmentation.models import (
     ADE20K_TFLITE,
     SAMPLES,
@@ -134,47 +133,7 @@ def test_ade20k_finds_the_structure_of_a_simulated_room(sim_recording: Path) -> 
     assert np.mean(np.isin(labels[structural], (1, 2, 3))) > 0.7
 
 
-# -- the combination -------------------------------------------------------------------------
-def _probs(*pixels: tuple[int, float]) -> torch.Tensor:
-    """Return (1, L, 1, n) probabilities: per pixel its label and that label's probability.
-
-    The rest is spread evenly over the labels other than person, plant and sofa.
-    """
-    out = torch.zeros(1, NUM_LABELS, 1, len(pixels))
-    for i, (label, p) in enumerate(pixels):
-        rest = [v for v in (0, 1, 2, 3, 4, 5, 9, 10) if v != label]
-        out[0, rest, 0, i] = (1 - p) / len(rest)
-        out[0, label, 0, i] = p
-    return out
-
-
-def test_combination_takes_structure_from_ade20k_and_confident_objects() -> None:
-    ade = _probs((3, 0.9), (3, 0.9), (5, 0.6), (5, 0.9), (10, 0.4), (0, 0.6), (4, 0.7))
-    voc = _probs((0, 0.99), (9, 0.8), (4, 0.7), (4, 0.7), (0, 0.9), (5, 0.55), (4, 0.4))
-    out = combine(ade, voc)
-    labels = out.argmax(dim=1)[0, 0].tolist()
-    # wall kept; VOC's confident monitor over a wall; the more confident of two objects (VOC
-    # 0.7 > ADE 0.6, then ADE 0.9 > VOC 0.7); ADE's unsure clutter where VOC sees nothing;
-    # VOC's chair where ADE has background; ADE's table where VOC is unsure.
-    assert labels == [3, 9, 4, 5, 10, 5, 4]
-    conf = out.max(dim=1).values[0, 0]
-    assert conf.tolist() == pytest.approx([0.9, 0.8, 0.7, 0.9, 0.4, 0.55, 0.7])
-
-
-def test_ade20k_person_plant_sofa_need_vocs_support() -> None:
-    ade = _probs((6, 0.8), (6, 0.8), (7, 0.6), (8, 0.9))
-    ade[0, 3, 0, 0] = 0.15  # wall is ADE20K's runner-up at the first pixel
-    ade[0, :, 0, 0] /= ade[0, :, 0, 0].sum()
-    voc = _probs((0, 0.95), (6, 0.45), (0, 0.95), (0, 0.95))
-    labels = combine(ade, voc).argmax(dim=1)[0, 0].tolist()
-    # pixel 0: VOC sees no person -> ADE20K's next label; pixel 1: VOC supports the person
-    # (0.45 >= 0.1) but is not confident itself -> ADE20K's person stands.
-    assert labels[:2] == [3, 6]
-    assert labels[2] != 7 and labels[3] != 8
-    out = combine(ade, voc)
-    assert torch.allclose(out.sum(dim=1), torch.ones(1, 1, 4), atol=1e-5)
-
-
+# -- the combined backend (its rule: test_seg_combined.py) ----------------------------------
 def test_combined_backend_segments_and_can_drop_structure(sim_recording: Path) -> None:
     with RecordingReader(sim_recording) as rec:
         color = next(iter(rec.frames())).color
