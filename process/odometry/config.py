@@ -40,6 +40,7 @@ _RANGES: Final[dict[str, tuple[float, float]]] = {
     "loop_min_similarity": (-1.0, 1.0),
     "loop_search_radius_m": (0.0, 100.0),
     "loop_min_inliers": (6, 10_000),
+    "loop_edges": (1, 20),
     "loop_cooldown": (0, 100_000),
     "loop_guided_radius_px": (0.0, 500.0),
     "loop_max_correspondence_m": (0.001, 10.0),
@@ -88,7 +89,8 @@ class OdometryConfig:
     loop_candidates: int = 5
     loop_min_similarity: float = 0.6  # thumbnail correlation for an appearance candidate
     loop_search_radius_m: float = 1.0  # pose-proximity candidates
-    loop_min_inliers: int = 60  # PnP inliers that verify a loop (the best candidate is kept)
+    loop_min_inliers: int = 60  # PnP inliers that verify a loop
+    loop_edges: int = 1  # verified candidates kept as edges, most inliers first
     loop_cooldown: int = 0  # keyframes after a loop closure before the next is searched
     loop_guided_radius_px: float = 60.0  # match around the graph's prediction first (0: never)
     loop_max_correspondence_m: float = 0.05  # line-process scale (Open3D's meaning)

@@ -52,7 +52,7 @@ def loop_candidates(
     return ids
 
 
-def find_loop(
+def find_loops(
     current: Keyframe,
     candidates: Sequence[Keyframe],
     *,
@@ -60,26 +60,24 @@ def find_loop(
     match_ratio: float,
     min_inliers: int,
     guide: Guide | None = None,
-) -> tuple[Edge, int] | None:
-    """Return the best verified loop edge (current -> an old keyframe) and its inlier count.
+) -> list[tuple[Edge, int]]:
+    """Return the verified loop edges (current -> old keyframes) and inlier counts, most first.
 
-    Each candidate is verified by PnP of its 3-D points against the current keypoints; only the
-    candidate with the most inliers is kept: the nearest view gives the most precise edge. With
-    a guide (the graph's current poses), features are first matched by projection around the
-    pose the graph predicts and that pose seeds PnP, as in tracking: on texture that repeats
-    (the desk's keyboard, book spines) all-against-all matching can reach a consensus that is
-    degrees off. Where that finds fewer matches than min_inliers (the graph has drifted far),
-    all-against-all matching is the fallback.
+    Each candidate is verified by PnP of its 3-D points against the current keypoints, refined
+    with the current keyframe's depth. With a guide (the graph's current poses), features are
+    first matched by projection around the pose the graph predicts and that pose seeds PnP, as
+    in tracking: on texture that repeats (the desk's keyboard, book spines) all-against-all
+    matching can reach a consensus that is degrees off. Where that finds fewer matches than
+    min_inliers (the graph has drifted far), all-against-all matching is the fallback.
     """
-    best: tuple[Edge, int] | None = None
+    found: list[tuple[Edge, int]] = []
     for old in candidates:
         prior = guide.camera_from(current.id, old.id) if guide is not None else None
-        found = _verify(current, old, pnp, match_ratio, min_inliers, prior, guide)
-        if found is None or (best is not None and len(found[1].inliers) <= best[1]):
+        verified = _verify(current, old, pnp, match_ratio, min_inliers, prior, guide)
+        if verified is None:
             continue
-        (q, t), result = found
+        (q, t), result = verified
         inliers_q, inliers_t = q[result.inliers], t[result.inliers]
-        # As for odometry edges: the current keyframe's own depth at the inliers refines the pose.
         k = pnp.camera_matrix
         xy = current.xy[inliers_q].astype(np.float64)
         normalised = np.stack([(xy[:, 0] - k[0, 2]) / k[0, 0], (xy[:, 1] - k[1, 2]) / k[1, 1]], 1)
@@ -92,8 +90,8 @@ def find_loop(
         )
         old_from_current = rigid_inverse(refined.camera_from_reference)
         edge = Edge(current.id, old.id, old_from_current, refined.information, True)
-        best = edge, len(result.inliers)
-    return best
+        found.append((edge, len(result.inliers)))
+    return sorted(found, key=lambda f: -f[1])
 
 
 @dataclass(frozen=True, slots=True)
@@ -168,7 +166,7 @@ class LoopCloser:
             radius_m=cfg.loop_search_radius_m,
         )
         candidates = [keyframes[i] for i in ids]
-        found = find_loop(
+        found = find_loops(
             kf,
             candidates,
             pnp=self.pnp,
@@ -176,18 +174,21 @@ class LoopCloser:
             min_inliers=cfg.loop_min_inliers,
             guide=Guide(self.graph.poses, self.intrinsics, cfg.loop_guided_radius_px),
         )
-        if found is None:
+        if not found:
             return ""
-        edge, n_inliers = found
-        self.graph.add_edge(edge)
-        # The keyframes before the loop's older end keep their poses: only the loop moves.
+        edges = [edge for edge, _ in found[: cfg.loop_edges]]
+        for edge in edges:
+            self.graph.add_edge(edge)
+        edge, n_inliers = found[0]
+        # The keyframes before the loops' oldest end keep their poses: only the loops move.
         moved_m, kept = self.graph.optimise(
             max_correspondence_m=cfg.loop_max_correspondence_m,
             prune_threshold=cfg.loop_prune_threshold,
-            first_free=edge.target,
+            first_free=min(e.target for e in edges),
         )
         self._cooldown = cfg.loop_cooldown
         return (
-            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers);"
+            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers)"
+            f"{f' and {len(edges) - 1} more' if len(edges) > 1 else ''};"
             f" {kept} loop edge(s) kept, keyframes moved by up to {moved_m:.3f} m"
         )
