@@ -3,9 +3,10 @@
     python -m benchmarks.real_segmentation_sheet [--out docs/real_segmentation.png]
 
 Six frames of TUM RGB-D `freiburg1_rpy` (../shared/data/tum_fr1_rpy, a real office desk seen by a
-Kinect), each segmented by the four shipped models, coloured with the RECORDING.md label colours
-(`capture.recording.LABEL_COLORS`), with a legend. It also
-prints, per model, the share of pixels of each label over the six frames.
+Kinect), then rooms no rule was tuned on: two real frames of slambook2_rgbd (a dining room) and one
+of ICL-NUIM (a rendered living room), each segmented by the four shipped models, coloured with the
+RECORDING.md label colours (`capture.recording.LABEL_COLORS`), with a legend. It also prints, per
+model, the share of pixels of each label over the TUM frames.
 """
 
 from __future__ import annotations
@@ -18,12 +19,17 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from benchmarks.seg_models import TUM_RGB, read_rgb, tum_files
+from benchmarks.seg_models import SHARED, TUM_RGB, read_rgb, tum_files
 from capture.recording import LABEL_COLORS, LABEL_NAMES
 from process.segmentation import SegmentationConfig, Segmenter
 from process.segmentation.models import shipped
 
 FRAMES = (60, 180, 240, 420, 540, 660)  # indices into the sorted rgb/ listing
+OTHERS = (  # (file under ../shared/data, caption)
+    ("slambook2_rgbd/color/1.png", "slambook2 1"),
+    ("slambook2_rgbd/color/4.png", "slambook2 4"),
+    ("icl_nuim/color/00000.jpg", "ICL-NUIM 0"),
+)
 MODELS = ("voc", "ade20k", "combined", "simulator")
 TITLES = ("image", "PASCAL VOC (int8)", "ADE20K (float)", "combined", "simulator checkpoint")
 TILE = (320, 240)
@@ -51,23 +57,30 @@ def _legend(width: int) -> npt.NDArray[np.uint8]:
 
 
 def frames() -> list[tuple[str, npt.NDArray[np.uint8]]]:
-    """Return (file name, RGB image) of the sheet's TUM frames."""
+    """Return (caption, RGB image) of the sheet's frames: TUM's, then the other rooms' found."""
     files = tum_files()
-    return [(files[i].name, read_rgb(files[i])) for i in FRAMES]
+    out = [(f"TUM fr1_rpy {files[i].name[:-4]}", read_rgb(files[i])) for i in FRAMES]
+    return out + [
+        (caption, read_rgb(SHARED / f)) for f, caption in OTHERS if (SHARED / f).is_file()
+    ]
 
 
 def sheet(threads: int = 1) -> tuple[npt.NDArray[np.uint8], dict[str, npt.NDArray[np.int64]]]:
     """Return the contact sheet (RGB) and each model's label pixel counts over the frames."""
     images = frames()
     cfg = SegmentationConfig(threads=threads)
-    rows = [[np.asarray(cv2.resize(im, TILE), np.uint8)] for _, im in images]
+    rows = [
+        [np.asarray(cv2.resize(im, TILE, interpolation=cv2.INTER_AREA), np.uint8)]
+        for _, im in images
+    ]
     counts: dict[str, npt.NDArray[np.int64]] = {}
     for name in MODELS:
         seg = Segmenter(cfg, choice=shipped(name, "contact sheet", cfg), device="cpu")
         counts[name] = np.zeros(len(LABEL_NAMES), np.int64)
-        for row, (_, image) in zip(rows, images, strict=True):
+        for row, (caption, image) in zip(rows, images, strict=True):
             labels = seg.segment(image).labels
-            counts[name] += np.bincount(labels.ravel(), minlength=len(LABEL_NAMES))
+            if caption.startswith("TUM"):
+                counts[name] += np.bincount(labels.ravel(), minlength=len(LABEL_NAMES))
             tile = cv2.resize(colourise(labels), TILE, interpolation=cv2.INTER_NEAREST)
             row.append(np.asarray(tile, np.uint8))
     header = np.full((30, TILE[0] * len(TITLES), 3), 40, np.uint8)
@@ -75,7 +88,7 @@ def sheet(threads: int = 1) -> tuple[npt.NDArray[np.uint8], dict[str, npt.NDArra
         _text(header, title, (i * TILE[0] + 8, 21))
     body = [np.hstack(r) for r in rows]
     for (name, _), tile_row in zip(images, body, strict=True):
-        _text(tile_row, f"TUM fr1_rpy {name[:-4]}", (8, TILE[1] - 10), 0.45)
+        _text(tile_row, name, (8, TILE[1] - 10), 0.45)
     return np.vstack([header, *body, _legend(header.shape[1])]), counts
 
 

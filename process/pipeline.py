@@ -33,9 +33,10 @@ from process.config import ReplayConfig, to_toml
 from process.depth import DepthProcessor
 from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
+from process.fusion.schedule import SegmentationSchedule
 from process.odometry.odometry import Odometry, TrackResult
 from process.preview import write_preview
-from process.streaming import Worker
+from process.streaming import Worker, prefetch
 from process.trajectory import Trajectory, ate_rmse, path_length, rpe, write_tum
 from viz.background import BackgroundLogger
 from viz.layout import STAGE_FUSED
@@ -64,6 +65,7 @@ class _Keyframe:
     depth_m: npt.NDArray[np.float32]  # (H, W) registered to colour
     keyframe_id: int
     world_from_camera: npt.NDArray[np.float64]  # (4, 4) when tracked
+    segment: bool  # False: geometry only (SegmentationSchedule)
 
 
 class ReplayPipeline:
@@ -98,6 +100,7 @@ class ReplayPipeline:
         self._frames = 0
         self._odometry: Odometry | None = None
         self._segmenter: Segmenter | None = None
+        self._schedule = SegmentationSchedule(cfg.segmentation.min_new_share)
         self._seg_stats = _SegStats()
         self._seg_model: dict[str, Any] = {}  # which model, why, its load time
         self._fusion = KeyframeFusion(cfg.fusion) if "fusion" in stages else None
@@ -182,14 +185,18 @@ class ReplayPipeline:
         return Trajectory.of(gt_stamps, gt_poses)
 
     def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
-        """Yield the recording's frames, timing the reading and decoding as its own stage."""
+        """Yield the recording's frames, read and decoded ahead on a thread (stage "read")."""
+        for frame in prefetch(self._read(rec), name="read", stop=self.stop):
+            self._frames += 1
+            yield frame
+
+    def _read(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
         frames = rec.frames()
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
-            self._frames += 1
             yield frame
 
     def _track(
@@ -209,7 +216,18 @@ class ReplayPipeline:
             track = self._odometry.track(frame, depth_m)
         self._log_frame(frame, depth_m, track)
         if track.is_keyframe and self._segmenter is not None:
-            kf = _Keyframe(frame, depth_m, track.state.keyframe_id, track.world_from_camera)
+            cells = self._schedule.new_cells(
+                depth_m,
+                intrinsics=frame.color_intrinsics,
+                world_from_camera=track.world_from_camera,
+            )
+            kf = _Keyframe(
+                frame,
+                depth_m,
+                track.state.keyframe_id,
+                track.world_from_camera,
+                segment=cells is not None,
+            )
             # Following a live capture, a keyframe the segmentation has no room for is left out
             # of the map rather than letting the whole job fall behind the camera; offline,
             # every keyframe is segmented (the frame loop waits).
@@ -218,6 +236,8 @@ class ReplayPipeline:
             elif not self._keyframes.offer(kf):
                 self._keyframes_skipped += 1
                 return
+            if cells is not None:  # what it sees is labelled now: later keyframes need not be
+                self._schedule.cover(cells)
             self._keyframe_stamps[kf.keyframe_id] = frame.stamp_ns
 
     def _log_frame(
@@ -261,21 +281,22 @@ class ReplayPipeline:
         assert self._segmenter is not None  # keyframes are queued only with a segmenter
         frame = kf.frame
         self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-        with self.clock("segmentation"):
-            seg = self._segmenter.segment(frame.color)
-        self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
-        gt = frame.ground_truth
-        if gt is not None and gt.labels is not None:
-            self._seg_stats.add(seg.labels, gt.labels)
-        self._seg_stats.keyframes += 1
+        if kf.segment:
+            with self.clock("segmentation"):
+                seg = self._segmenter.segment(frame.color)
+            self.viz.log_segmentation(seg.labels, confidence=seg.confidence)
+            gt = frame.ground_truth
+            if gt is not None and gt.labels is not None:
+                self._seg_stats.add(seg.labels, gt.labels)
+            self._seg_stats.keyframes += 1
+            labels, confidence = seg.labels, seg.confidence
+        else:  # geometry only: no label votes
+            self._seg_stats.geometry_only += 1
+            labels = np.zeros(frame.color.shape[:2], np.uint8)
+            confidence = np.zeros(frame.color.shape[:2], np.float32)
         if self._fusion is not None:
             labelled = LabelledKeyframe(
-                kf.keyframe_id,
-                frame.color,
-                kf.depth_m,
-                seg.labels,
-                seg.confidence,
-                frame.color_intrinsics,
+                kf.keyframe_id, frame.color, kf.depth_m, labels, confidence, frame.color_intrinsics
             )
             with self.clock("fusion"):
                 self._fusion.add(labelled, world_from_camera=kf.world_from_camera)
@@ -322,8 +343,11 @@ class ReplayPipeline:
         assert self._fusion is not None
         pose_at = dict(zip(trajectory.stamps_ns.tolist(), trajectory.poses, strict=True))
         poses = {kf: pose_at[stamp] for kf, stamp in self._keyframe_stamps.items()}
-        with self.clock("fusion"):
-            cloud = self._fusion.cloud(poses)
+        wall0, cpu0 = time.perf_counter(), time.thread_time()
+        cloud = self._fusion.cloud(poses)
+        # a map fused again at the final poses is a stage of its own: it runs after the frames
+        stage = "refusion" if self._fusion.refused else "fusion"
+        self.clock.add(stage, time.perf_counter() - wall0, time.thread_time() - cpu0)
         if self._fusion.refused:
             self.viz.log_text("loop closures moved keyframes: the map was fused again")
         self._write_cloud(outputs.MAP_FUSED, cloud)
@@ -425,12 +449,20 @@ class ReplayPipeline:
         self.result.written.append(path)
 
 
-_ONCE = frozenset({"refinement"})  # stages that run once per job: no frames/s
+_ONCE = frozenset({"refinement", "refusion"})  # stages that run once per job: no frames/s
 
 
 def _limit_threads() -> None:
-    """Leave the second core to the keyframe and logging threads: OpenCV's pool would take it."""
+    """Leave the second core to the keyframe and logging threads: OpenCV's pool would take it.
+
+    BLAS gets one thread: the pipeline's matrix products are small (points times a 3x3
+    rotation), and a second OpenBLAS thread spins after each one (5.5 of 41 CPU seconds on
+    TUM fr1_rpy).
+    """
+    from threadpoolctl import threadpool_limits
+
     cv2.setNumThreads(max(1, (os.cpu_count() or 2) - 1))
+    threadpool_limits(limits=1, user_api="blas")
 
 
 class _StageClock:
@@ -458,6 +490,7 @@ class _SegStats:
 
     def __init__(self) -> None:
         self.keyframes = 0
+        self.geometry_only = 0  # keyframes the schedule left unsegmented
         self.confusion = np.zeros((len(LABEL_NAMES), len(LABEL_NAMES)), np.int64)
 
     def add(self, pred: npt.NDArray[np.uint8], gt: npt.NDArray[np.uint8]) -> None:
@@ -466,6 +499,7 @@ class _SegStats:
     def summary(self, seconds: float) -> dict[str, Any]:
         out: dict[str, Any] = {
             "keyframes": self.keyframes,
+            "keyframes_geometry_only": self.geometry_only,
             "ms_per_keyframe": round(1000 * seconds / self.keyframes, 2)
             if self.keyframes
             else None,

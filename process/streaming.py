@@ -13,7 +13,7 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Generator, Iterator
 from typing import Final, Generic, TypeVar
 
 T = TypeVar("T")
@@ -75,3 +75,52 @@ class Worker(Generic[T]):
             self.seconds += time.perf_counter() - t0
             self.cpu_seconds += time.thread_time() - c0
             self.items += 1
+
+
+def prefetch(
+    items: Iterator[T], *, name: str, ahead: int = 4, stop: threading.Event | None = None
+) -> Generator[T, None, None]:
+    """Yield `items`, produced on a thread of their own up to `ahead` items in advance.
+
+    The producer's errors are raised here, in order. Closing the generator early (an error or
+    Ctrl-C in the consumer) sets `stop` (which a producer waiting for input, such as a reader
+    following a growing file, watches) and waits for the producer to stop at its next item.
+    """
+    out: queue.Queue[tuple[bool, object]] = queue.Queue(maxsize=ahead)
+    closed = threading.Event()
+
+    def put(done: bool, value: object) -> bool:
+        while not closed.is_set():
+            try:
+                out.put((done, value), timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for item in items:
+                if not put(False, item):
+                    return
+        except BaseException as err:  # handed to the consumer in order
+            put(True, err)
+            return
+        put(True, _STOP)
+
+    thread = threading.Thread(target=produce, name=f"semreplay-{name}", daemon=True)
+    thread.start()
+    try:
+        while True:
+            done, value = out.get()
+            if not done:
+                yield value  # type: ignore[misc]
+                continue
+            if isinstance(value, BaseException):
+                raise value
+            return
+    finally:
+        closed.set()
+        if stop is not None:
+            stop.set()
+        thread.join()

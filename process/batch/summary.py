@@ -14,7 +14,16 @@ CSV: Final = "summary.csv"
 PARQUET: Final = "summary.parquet"
 PREVIEW: Final = outputs.PREVIEW  # a top view of the map, where `process run` made one
 MARKER: Final = "batch.json"  # a folder's row, written last: the folder is complete
-STAGES: Final = ("read", "depth", "odometry", "segmentation", "fusion", "refinement", "logging")
+STAGES: Final = (
+    "read",
+    "depth",
+    "odometry",
+    "segmentation",
+    "fusion",
+    "refusion",
+    "refinement",
+    "logging",
+)
 PHASES: Final = ("I", "II", "III")
 
 # Column name -> type; the order is the order of the CSV and Parquet columns.

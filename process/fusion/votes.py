@@ -12,6 +12,7 @@ import numpy.typing as npt
 from capture.recording import NUM_LABELS, Intrinsics
 from process.cloud import LabelledCloud
 from process.errors import ConfigError, StageError
+from process.fusion.bleed import spilled_labels
 from process.fusion.tsdf import TsdfSurface
 from process.geometry import normalise
 
@@ -37,6 +38,13 @@ class FusionConfig:
     # phase I F1 0.92 / 0.91 / 0.90 / 0.87 on a simulated 900-frame loop; 0.84 with "voxels")
     truncation_voxels: float = 2.5
     min_views: int = 3  # TSDF surface points need this many keyframes to have seen them
+    # object-label pixels whose depth is an outlier of their blob's cast no vote (`bleed.py`):
+    # further from its median depth than this many robust standard deviations (0 = off) ...
+    spill_mad_factor: float = 3.0
+    spill_min_margin_m: float = 0.25  # ... and than this
+    # a surface point in a voxel without label votes takes the nearest voted voxel's label this
+    # many voxels away at most (8 cm: the cells by which keyframes are chosen for segmentation)
+    label_reach_voxels: float = 4.0
 
     def __post_init__(self) -> None:
         if not 0.001 <= self.voxel_size_m <= 1.0:
@@ -58,6 +66,15 @@ class FusionConfig:
             )
         if not 1 <= self.min_views <= 1_000_000:
             raise ConfigError(f"fusion.min_views must be >= 1, got {self.min_views}")
+        if not (0.0 <= self.spill_mad_factor <= 100.0 and 0.0 <= self.spill_min_margin_m <= 100.0):
+            raise ConfigError(
+                "fusion.spill_mad_factor and spill_min_margin_m must be in 0..100, got "
+                f"{self.spill_mad_factor} and {self.spill_min_margin_m}"
+            )
+        if not 0.0 <= self.label_reach_voxels <= 64.0:
+            raise ConfigError(
+                f"fusion.label_reach_voxels must be in 0..64, got {self.label_reach_voxels}"
+            )
 
 
 @lru_cache(maxsize=8)
@@ -158,6 +175,15 @@ class Fusion:
         world = camera_points @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
         weight = np.nan_to_num(confidence.reshape(-1)[flat].astype(np.float32))
         weight = np.where(weight >= self.cfg.min_confidence, weight, np.float32(0.0))
+        if self.cfg.spill_mad_factor > 0:
+            step = self.cfg.pixel_stride
+            spilled = spilled_labels(
+                labels[::step, ::step],
+                depth_m[::step, ::step],
+                mad_factor=self.cfg.spill_mad_factor,
+                min_margin_m=self.cfg.spill_min_margin_m,
+            )
+            weight[spilled.reshape(-1)[valid]] = 0.0
         self._accumulate(world, color.reshape(-1, 3)[flat], labels.reshape(-1)[flat], weight)
         if self._tsdf is not None:
             self._tsdf.integrate(
@@ -231,8 +257,10 @@ class Fusion:
 
         With the TSDF surface the points are its zero crossing, each labelled by the vote voxel
         it lies in (or the nearest one within two voxels; points with none are dropped); else
-        one point per voxel at the mean of its samples. A voxel nobody voted for confidently
-        (all weights 0) stays unlabelled.
+        one point per voxel at the mean of its samples. A TSDF point whose voxel nobody voted
+        for confidently takes the label of the nearest voxel that was voted for within
+        `label_reach_voxels` (keyframes that were not segmented add geometry but no votes);
+        beyond that it stays unlabelled.
         """
         n = self._size
         count = self._count[:n, None]
@@ -246,7 +274,31 @@ class Fusion:
         points = self._tsdf.points(min_views=min(self.cfg.min_views, max(self.frames, 1)))
         slots = self._slots_of(points, centroids)
         keep = slots >= 0
-        return LabelledCloud(points[keep], colors[slots[keep]], labels[slots[keep]])
+        points, slots = points[keep], slots[keep]
+        return LabelledCloud(points, colors[slots], self._reach(points, slots, labels, votes))
+
+    def _reach(
+        self,
+        points: npt.NDArray[np.float32],
+        slots: npt.NDArray[np.int64],
+        labels: npt.NDArray[np.uint8],
+        votes: npt.NDArray[np.float32],
+    ) -> npt.NDArray[np.uint8]:
+        """Return the points' labels: their voxel's, or the nearest voted voxel's within reach."""
+        voted = votes.max(axis=1) > 0
+        out = labels[slots]
+        lonely = ~voted[slots]
+        reach = self.cfg.label_reach_voxels * self.cfg.voxel_size_m
+        if reach <= 0 or not lonely.any() or not voted.any():
+            return out
+        from scipy.spatial import cKDTree
+
+        rows = np.flatnonzero(voted)
+        centroids = (self._sum_xyz[rows] / self._count[rows, None]).astype(np.float32)
+        distance, nearest = cKDTree(centroids).query(points[lonely], distance_upper_bound=reach)
+        near = np.isfinite(distance)
+        out[np.flatnonzero(lonely)[near]] = labels[rows[nearest[near]]]
+        return out
 
     def _slots_of(
         self, points: npt.NDArray[np.float32], centroids: npt.NDArray[np.float32]

@@ -31,6 +31,9 @@ class SegmentationConfig:
     short_side_px: int = 0  # network input short side; 0 = what the checkpoint was trained at
     channels_last: bool = True  # NHWC memory format for the torch backend (faster on CPU)
     structural_to_background: bool = False  # report ceiling/floor/wall (1-3) as 0
+    # A keyframe is segmented when at least this share of its depth lies in 8 cm cells that no
+    # segmented keyframe has seen; the others add only geometry to the map (0: every keyframe).
+    min_new_share: float = 0.1
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
@@ -49,6 +52,10 @@ class SegmentationConfig:
             raise ConfigError(f"segmentation.threads must be in [0, 256], got {self.threads}")
         if not 1 <= self.batch_size <= 64:
             raise ConfigError(f"segmentation.batch_size must be in [1, 64], got {self.batch_size}")
+        if not 0.0 <= self.min_new_share <= 1.0:
+            raise ConfigError(
+                f"segmentation.min_new_share must be in [0, 1], got {self.min_new_share}"
+            )
         if self.short_side_px != 0 and not 32 <= self.short_side_px <= 2048:
             raise ConfigError(
                 "segmentation.short_side_px must be 0 (checkpoint's) or in [32, 2048], "

@@ -31,6 +31,7 @@ class Runtime(Protocol):
     """What the Segmenter needs of a runtime."""
 
     fixed_input_size: tuple[int, int] | None  # (width, height) the model requires, if any
+    align_corners: bool  # whether the output grid's corner samples are the input's corners
 
     def __call__(self, batch: npt.NDArray[np.uint8]) -> torch.Tensor:
         """Return label probabilities (N, L, h, w) for images (N, h, w, 3)."""
@@ -94,6 +95,7 @@ class TorchRuntime:
     """Run the network with torch in inference mode, channels_last on CPU when asked."""
 
     fixed_input_size: tuple[int, int] | None = None
+    align_corners = False
 
     def __init__(
         self, ckpt: Checkpoint, *, device: str = "auto", channels_last: bool = True
@@ -138,6 +140,7 @@ class OnnxRuntime:
     """Run an ONNX export of a checkpoint with onnxruntime's CPU provider."""
 
     fixed_input_size: tuple[int, int] | None = None
+    align_corners = False
 
     def __init__(self, model: Checkpoint | Path, *, threads: int = 0) -> None:
         try:

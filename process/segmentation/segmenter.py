@@ -60,7 +60,7 @@ class Segmenter:
             if cfg.backend != "torch"
             else str(pick_device(device if device != "auto" else cfg.device))
         )
-        self.short_side_px = 0  # 0: the runtime fixes the input size
+        self.short_side_px = 0  # 0: the runtime fixes or fits the input size
         self.checkpoint_info: dict[str, object] = {}
         self.runtime = self._make_runtime()
         logger.info("segmentation: %s on %s (%s)", choice.name, cfg.backend, self.device)
@@ -110,6 +110,8 @@ class Segmenter:
         """Return the (width, height) at which an image of this size goes through the network."""
         if self.runtime.fixed_input_size is not None:
             return self.runtime.fixed_input_size
+        if not self.short_side_px:  # the runtime fits each image to its networks itself
+            return width, height
         scale = self.short_side_px / min(height, width)
         return max(16, round(width * scale)), max(16, round(height * scale))
 
@@ -149,7 +151,12 @@ class Segmenter:
         ).astype(np.uint8, copy=False)
         probs = self.runtime(batch)
         if probs.shape[2:] != (h, w):
-            probs = F.interpolate(probs.float(), size=(h, w), mode="bilinear", align_corners=False)
+            probs = F.interpolate(
+                probs.float(),
+                size=(h, w),
+                mode="bilinear",
+                align_corners=self.runtime.align_corners,
+            )
         confidence, labels = probs.max(dim=1)
         labels_np = labels.to(torch.uint8).cpu().numpy()
         conf_np = confidence.clamp_(0.0, 1.0).float().cpu().numpy()

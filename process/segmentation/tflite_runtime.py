@@ -1,13 +1,12 @@
 """TFLite runtime for published DeepLab models: Google's PASCAL VOC int8 one, the ADE20K float one.
 
-Such models take a fixed-size image (uint8, or float RGB scaled to [-1, 1]) and end either in
-class scores (float or quantised, any class count) or in an ArgMax. For an ArgMax model we read
-the tensor that feeds the ArgMax (the class logits, already resized to the input size); that
-needs the interpreter without its default XNNPACK delegate, so only such models pay for it. The
-logits are dequantised, subsampled by `OUTPUT_STRIDE` (they are a bilinear upsampling of the
-network's stride-8 output, so nothing is lost and the softmax costs a quarter), and their
-softmax is summed into RECORDING.md labels through a class -> label map chosen by class count
-(`label_map_for`).
+Such models take a fixed-size image (uint8, or float RGB scaled to [-1, 1]) and end in a resize of
+their class logits to the input size, sometimes followed by an ArgMax. Those trailing ops are cut
+off at load (`tflite_graph`): the network's logits are its output and every op runs in the
+XNNPACK delegate. The logits (float or quantised, any class count) are dequantised, brought to
+the stride-4 grid of the input (VOC's stride-16 logits upsampled, corner-aligned as DeepLab's own
+resize), and their softmax is summed into RECORDING.md labels through a class -> label map
+chosen by class count (`label_map_for`).
 """
 
 from __future__ import annotations
@@ -19,13 +18,15 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 import torch
+from torch.nn import functional as F  # noqa: N812 (the torch convention)
 
 from capture.recording import VOC_TO_LABEL
 from process.errors import ModelError
 from process.segmentation.ade20k import ADE20K_CLASS_TO_LABEL
+from process.segmentation.tflite_graph import cut_graph, logits_end
 from process.segmentation.weights import label_matrix
 
-OUTPUT_STRIDE: Final = 2  # subsample the 513x513 logits to 257x257
+OUTPUT_STRIDE: Final = 4  # label probabilities on the input's stride-4 grid (129x129 for 513)
 KNOWN_LABEL_MAPS: Final[dict[int, tuple[str, tuple[int, ...]]]] = {
     len(VOC_TO_LABEL): ("PASCAL VOC", VOC_TO_LABEL),
     len(ADE20K_CLASS_TO_LABEL): ("ADE20K", ADE20K_CLASS_TO_LABEL),
@@ -46,6 +47,8 @@ def label_map_for(n_classes: int, path: Path) -> tuple[int, ...]:
 class TfliteRuntime:
     """Run a DeepLab .tflite model with ai-edge-litert, one image at a time."""
 
+    align_corners = True  # the output grid's corners are the input's (DeepLab's 513 = 128*4+1)
+
     def __init__(
         self,
         path: Path,
@@ -57,14 +60,18 @@ class TfliteRuntime:
         """Load the model; the class map defaults to the one of its class count."""
         self.path = path
         self.threads = threads
-        self.interp: Any = self._load(preserve=False)
-        if self._ends_in_argmax():  # the logits feeding the ArgMax must stay readable
-            self.interp = self._load(preserve=True)
+        self.interp: Any = self._load()
         inp = self.interp.get_input_details()[0]
         _, h, w, _ = (int(v) for v in inp["shape"])
         self.fixed_input_size: tuple[int, int] | None = (w, h)
+        self.output_size = ((h - 1) // OUTPUT_STRIDE + 1, (w - 1) // OUTPUT_STRIDE + 1)
         self._input = inp
-        self._logits = self._logits_tensor()
+        self._logits: dict[str, Any] = self.interp.get_output_details()[0]
+        if len(self._logits["shape"]) != 4:
+            raise ModelError(
+                f"TFLite model output has shape {list(self._logits['shape'])}, expected "
+                f"(1, H, W, classes) scores, or scores resized and ArgMax-ed: {self.path}"
+            )
         self.n_classes = int(self._logits["shape"][-1])
         if class_to_label is None:
             class_to_label = label_map_for(self.n_classes, path)
@@ -75,53 +82,34 @@ class TfliteRuntime:
             )
         self.to_labels = label_matrix(relabel(class_to_label) if relabel else class_to_label)
 
-    def _load(self, *, preserve: bool) -> Any:
+    def _load(self) -> Any:
         try:
             from ai_edge_litert.interpreter import Interpreter, OpResolverType
         except ImportError as err:
             raise ImportError(
                 "the tflite backend needs ai-edge-litert: pip install '.[tflite]'"
             ) from err
-        resolver = (
-            OpResolverType.BUILTIN_WITHOUT_DEFAULT_DELEGATES if preserve else OpResolverType.AUTO
-        )
         try:
-            interp = Interpreter(
-                model_path=str(self.path),
-                num_threads=self.threads or None,
-                experimental_op_resolver_type=resolver,
-                experimental_preserve_all_tensors=preserve,
+            model = self.path.read_bytes()
+            probe = Interpreter(
+                model_content=model,
+                experimental_op_resolver_type=OpResolverType.BUILTIN_WITHOUT_DEFAULT_DELEGATES,
             )
+            ops = probe._get_ops_details()
+            logits, n_ops = logits_end(ops, int(probe.get_output_details()[0]["index"]))
+            if n_ops < len(ops):
+                model = cut_graph(model, output_tensor=logits, n_operators=n_ops)
+            interp = Interpreter(model_content=model, num_threads=self.threads or None)
             interp.allocate_tensors()
-        except (ValueError, RuntimeError) as err:
+        except (ValueError, RuntimeError, OSError) as err:
             raise ModelError(
                 f"cannot load the TFLite model ({str(err)[:120]}); expected a .tflite file: "
                 f"{self.path}"
             ) from err
         return interp
 
-    def _ends_in_argmax(self) -> bool:
-        out = self.interp.get_output_details()[0]
-        return bool(np.issubdtype(out["dtype"], np.integer) and len(out["shape"]) == 3)
-
-    def _logits_tensor(self) -> dict[str, Any]:
-        out = self.interp.get_output_details()[0]
-        index = int(out["index"])
-        if self._ends_in_argmax():
-            feeding = [op for op in self.interp._get_ops_details() if index in list(op["outputs"])]
-            index = int(feeding[0]["inputs"][0])
-        details: dict[str, Any] = next(
-            t for t in self.interp.get_tensor_details() if t["index"] == index
-        )
-        if len(details["shape"]) not in (3, 4):
-            raise ModelError(
-                f"TFLite model output has shape {list(details['shape'])}, expected "
-                f"(1, H, W, classes) scores or an (1, H, W) ArgMax: {self.path}"
-            )
-        return details
-
     def __call__(self, batch: npt.NDArray[np.uint8]) -> torch.Tensor:
-        """Return label probabilities (N, L, h, w) for images at the model's input size."""
+        """Return label probabilities (N, L, h, w) on the stride-4 grid of the input size."""
         return torch.cat([self._one(image) for image in batch])
 
     def _one(self, image: npt.NDArray[np.uint8]) -> torch.Tensor:
@@ -131,12 +119,16 @@ class TfliteRuntime:
         self.interp.set_tensor(self._input["index"], x)
         self.interp.invoke()
         raw = self.interp.get_tensor(self._logits["index"])
-        raw = raw[..., ::OUTPUT_STRIDE, ::OUTPUT_STRIDE, :]
-        logits = torch.from_numpy(np.ascontiguousarray(raw, dtype=np.float32))
+        logits = torch.from_numpy(raw.astype(np.float32))  # NHWC
         scale, zero = self._logits["quantization"]
         if scale:
             logits = (logits - zero) * scale
-        if logits.ndim == 3:
-            logits = logits[None]
-        probs = torch.softmax(logits, dim=-1)  # NHWC
+        if logits.shape[1:3] != self.output_size:
+            logits = F.interpolate(
+                logits.permute(0, 3, 1, 2),
+                size=self.output_size,
+                mode="bilinear",
+                align_corners=True,
+            ).permute(0, 2, 3, 1)
+        probs = torch.softmax(logits, dim=-1)  # over the contiguous class axis
         return torch.einsum("lc,nhwc->nlhw", self.to_labels, probs)

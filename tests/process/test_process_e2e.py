@@ -122,6 +122,8 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
     seg = metrics["segmentation"]
     assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d", "load_s"} <= set(seg)
+    assert 1 <= seg["keyframes"] <= odo["keyframes"]
+    assert seg["keyframes"] + seg["keyframes_geometry_only"] == odo["keyframes"]
     assert 0.0 <= seg["miou_2d"] <= 1.0
     assert seg["model"] == "simulator" and "simulated recording" in seg["model_reason"]
     phases = metrics["refinement"]["phases"]
@@ -242,6 +244,16 @@ def test_refine_command_on_a_labelled_cloud(run_twice: dict[str, Any], tmp_path:
         outputs.METRICS,
     ]
     assert len(read_cloud(out / outputs.MAP_REFINED)) <= len(read_cloud(fused))
+
+
+def test_the_pipeline_keeps_blas_to_one_thread() -> None:
+    from threadpoolctl import threadpool_info
+
+    from process.pipeline import _limit_threads
+
+    _limit_threads()
+    blas = [pool for pool in threadpool_info() if pool["user_api"] == "blas"]
+    assert blas and all(pool["num_threads"] == 1 for pool in blas)
 
 
 def test_python_dash_m_is_the_same_program() -> None:

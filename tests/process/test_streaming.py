@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterator
 
 import pytest
 
 from process.errors import StageError
-from process.streaming import Worker
+from process.streaming import Worker, prefetch
 
 
 def test_items_are_handled_in_order_and_offer_refuses_when_the_queue_is_full() -> None:
@@ -37,3 +38,31 @@ def test_a_failing_stage_raises_in_the_producer() -> None:
     worker.submit(7)
     with pytest.raises(StageError, match="item 7 failed"):
         worker.join()
+
+
+def test_prefetch_yields_in_order_and_raises_the_producers_error_in_place() -> None:
+    def items() -> Iterator[int]:
+        yield from range(5)
+        raise StageError("frame 5 is damaged")
+
+    got: list[int] = []
+    with pytest.raises(StageError, match="frame 5 is damaged"):
+        for item in prefetch(items(), name="test", ahead=2):
+            got.append(item)
+    assert got == [0, 1, 2, 3, 4]
+
+
+def test_closing_prefetch_early_stops_the_producer_and_sets_stop() -> None:
+    stop = threading.Event()
+    produced: list[int] = []
+
+    def items() -> Iterator[int]:  # like a follower: at the end, waits for input until stop
+        for i in range(1000):
+            produced.append(i)
+            yield i
+        stop.wait(timeout=30)
+
+    stream = prefetch(items(), name="test", ahead=2, stop=stop)
+    assert next(stream) == 0
+    stream.close()  # the consumer failed or was interrupted
+    assert stop.is_set() and len(produced) <= 5  # the producer stopped at once, ahead <= 2

@@ -13,7 +13,6 @@ from capture.recording import NUM_LABELS, VOC_TO_LABEL, RecordingReader
 from process.errors import ConfigError, ModelError
 from process.evaluate import confusion_iou, confusion_matrix
 from process.segmentation import SegmentationConfig, Segmenter, ade20k
-from process.segmentation.combined import combine
 from process.segmentation.models import (
     ADE20K_TFLITE,
     SAMPLES,
@@ -22,6 +21,7 @@ from process.segmentation.models import (
     is_simulated,
     shipped,
 )
+from process.segmentation.tflite_graph import cut_graph, logits_end
 from process.segmentation.tflite_runtime import TfliteRuntime, label_map_for
 from process.segmentation.weights import SAMPLES_CHECKPOINT
 
@@ -76,11 +76,48 @@ def test_float_ade20k_and_int8_voc_models_load_with_their_class_counts() -> None
     image = np.random.default_rng(0).integers(0, 255, (1, 513, 513, 3), dtype=np.uint8)
     for runtime in (ade, voc):
         probs = runtime(image)
-        assert probs.shape == (1, NUM_LABELS, 257, 257)
-        assert torch.allclose(probs.sum(dim=1), torch.ones(1, 257, 257), atol=1e-4)
+        assert probs.shape == (1, NUM_LABELS, 129, 129)
+        assert torch.allclose(probs.sum(dim=1), torch.ones(1, 129, 129), atol=1e-4)
     assert float(voc(image)[:, 1:4].max()) == 0.0  # VOC never says ceiling, floor or wall
     with pytest.raises(ModelError, match="151 classes but the label map has 21"):
         TfliteRuntime(ADE20K_TFLITE, class_to_label=VOC_TO_LABEL)
+
+
+def test_cut_graphs_label_every_pixel_as_the_published_models_do() -> None:
+    """The logits cut off before the trailing resize/ArgMax give the whole model's argmax."""
+    from ai_edge_litert.interpreter import Interpreter
+
+    image = np.random.default_rng(1).integers(0, 255, (1, 513, 513, 3), dtype=np.uint8)
+    image[:, 100:400, 150:350] = (200, 40, 40)  # a block, so that not every pixel is noise
+    for path in (ADE20K_TFLITE, VOC_TFLITE):
+        whole = Interpreter(model_path=str(path), num_threads=1)
+        whole.allocate_tensors()
+        inp = whole.get_input_details()[0]
+        x = image if inp["dtype"] == np.uint8 else image.astype(np.float32) / 127.5 - 1.0
+        whole.set_tensor(inp["index"], x)
+        whole.invoke()
+        out = whole.get_tensor(whole.get_output_details()[0]["index"])
+        expected = out.argmax(-1) if out.ndim == 4 else out  # ADE20K: scores, VOC: ArgMax
+        cut = TfliteRuntime(path, threads=1).interp  # its output: the class scores
+        cut.set_tensor(inp["index"], x)
+        cut.invoke()
+        logits = torch.from_numpy(cut.get_tensor(cut.get_output_details()[0]["index"]) * 1.0)
+        # class scores, resized to 513 corner-aligned as DeepLab does, argmax-ed
+        up = torch.nn.functional.interpolate(
+            logits.permute(0, 3, 1, 2), size=(513, 513), mode="bilinear", align_corners=True
+        )
+        assert (up.argmax(1).numpy() == expected).mean() > 0.995
+
+
+def test_a_graph_that_cannot_be_cut_is_refused_in_one_line() -> None:
+    model = ADE20K_TFLITE.read_bytes()
+    with pytest.raises(ValueError, match="cannot keep 0 operators"):
+        cut_graph(model, output_tensor=0, n_operators=0)
+    ops: list[dict[str, object]] = [{"op_name": "CONV_2D", "inputs": [1], "outputs": [2]}]
+    assert logits_end(ops, 2) == (2, 1)  # nothing to cut
+    ops += [{"op_name": "RESIZE_BILINEAR", "inputs": [2, 7], "outputs": [3]}]
+    ops += [{"op_name": "ARG_MAX", "inputs": [3, 8], "outputs": [4]}]
+    assert logits_end(ops, 4) == (2, 1)
 
 
 def test_ade20k_finds_the_structure_of_a_simulated_room(sim_recording: Path) -> None:
@@ -96,47 +133,7 @@ def test_ade20k_finds_the_structure_of_a_simulated_room(sim_recording: Path) -> 
     assert np.mean(np.isin(labels[structural], (1, 2, 3))) > 0.7
 
 
-# -- the combination -------------------------------------------------------------------------
-def _probs(*pixels: tuple[int, float]) -> torch.Tensor:
-    """Return (1, L, 1, n) probabilities: per pixel its label and that label's probability.
-
-    The rest is spread evenly over the labels other than person, plant and sofa.
-    """
-    out = torch.zeros(1, NUM_LABELS, 1, len(pixels))
-    for i, (label, p) in enumerate(pixels):
-        rest = [v for v in (0, 1, 2, 3, 4, 5, 9, 10) if v != label]
-        out[0, rest, 0, i] = (1 - p) / len(rest)
-        out[0, label, 0, i] = p
-    return out
-
-
-def test_combination_takes_structure_from_ade20k_and_confident_objects() -> None:
-    ade = _probs((3, 0.9), (3, 0.9), (5, 0.6), (5, 0.9), (10, 0.4), (0, 0.6), (4, 0.7))
-    voc = _probs((0, 0.99), (9, 0.8), (4, 0.7), (4, 0.7), (0, 0.9), (5, 0.55), (4, 0.4))
-    out = combine(ade, voc)
-    labels = out.argmax(dim=1)[0, 0].tolist()
-    # wall kept; VOC's confident monitor over a wall; the more confident of two objects (VOC
-    # 0.7 > ADE 0.6, then ADE 0.9 > VOC 0.7); ADE's unsure clutter where VOC sees nothing;
-    # VOC's chair where ADE has background; ADE's table where VOC is unsure.
-    assert labels == [3, 9, 4, 5, 10, 5, 4]
-    conf = out.max(dim=1).values[0, 0]
-    assert conf.tolist() == pytest.approx([0.9, 0.8, 0.7, 0.9, 0.4, 0.55, 0.7])
-
-
-def test_ade20k_person_plant_sofa_need_vocs_support() -> None:
-    ade = _probs((6, 0.8), (6, 0.8), (7, 0.6), (8, 0.9))
-    ade[0, 3, 0, 0] = 0.15  # wall is ADE20K's runner-up at the first pixel
-    ade[0, :, 0, 0] /= ade[0, :, 0, 0].sum()
-    voc = _probs((0, 0.95), (6, 0.45), (0, 0.95), (0, 0.95))
-    labels = combine(ade, voc).argmax(dim=1)[0, 0].tolist()
-    # pixel 0: VOC sees no person -> ADE20K's next label; pixel 1: VOC supports the person
-    # (0.45 >= 0.1) but is not confident itself -> ADE20K's person stands.
-    assert labels[:2] == [3, 6]
-    assert labels[2] != 7 and labels[3] != 8
-    out = combine(ade, voc)
-    assert torch.allclose(out.sum(dim=1), torch.ones(1, 1, 4), atol=1e-5)
-
-
+# -- the combined backend (its rule: test_seg_combined.py) ----------------------------------
 def test_combined_backend_segments_and_can_drop_structure(sim_recording: Path) -> None:
     with RecordingReader(sim_recording) as rec:
         color = next(iter(rec.frames())).color
