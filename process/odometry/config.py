@@ -34,12 +34,15 @@ _RANGES: Final[dict[str, tuple[float, float]]] = {
     "dense_max_reprojection_px": (0.0, 100.0),
     "relocalise_keyframes": (0, 50),
     "lost_frames_new_segment": (1, 100_000),
+    "covisible_keyframes": (0, 10),
     "loop_min_gap": (2, 100_000),
     "loop_candidates": (1, 20),
     "loop_min_similarity": (-1.0, 1.0),
     "loop_search_radius_m": (0.0, 100.0),
     "loop_min_inliers": (6, 10_000),
+    "loop_edges": (1, 20),
     "loop_cooldown": (0, 100_000),
+    "loop_guided_radius_px": (0.0, 500.0),
     "loop_max_correspondence_m": (0.001, 10.0),
     "loop_prune_threshold": (0.0, 0.99),
 }
@@ -80,13 +83,16 @@ class OdometryConfig:
     dense_max_reprojection_px: float = 0.5  # ... and those that worsen the PnP inliers' RMS more
     relocalise_keyframes: int = 5  # recent keyframes tried when tracking fails
     lost_frames_new_segment: int = 15  # lost this long: start a new segment
+    covisible_keyframes: int = 2  # a new keyframe is also located against this many before
     loop_closure: bool = True
-    loop_min_gap: int = 10  # keyframes between a loop's ends
-    loop_candidates: int = 3
+    loop_min_gap: int = 5  # keyframes between a loop's ends
+    loop_candidates: int = 5
     loop_min_similarity: float = 0.6  # thumbnail correlation for an appearance candidate
     loop_search_radius_m: float = 1.0  # pose-proximity candidates
-    loop_min_inliers: int = 100  # PnP inliers that verify a loop (the best candidate is kept)
-    loop_cooldown: int = 3  # keyframes after a loop closure before the next is searched
+    loop_min_inliers: int = 60  # PnP inliers that verify a loop
+    loop_edges: int = 1  # verified candidates kept as edges, most inliers first
+    loop_cooldown: int = 0  # keyframes after a loop closure before the next is searched
+    loop_guided_radius_px: float = 60.0  # match around the graph's prediction first (0: never)
     loop_max_correspondence_m: float = 0.05  # line-process scale (Open3D's meaning)
     loop_prune_threshold: float = 0.25
 

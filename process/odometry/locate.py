@@ -16,6 +16,8 @@ from process.odometry.pose_refine import refine_with_depth
 if TYPE_CHECKING:
     from process.odometry.config import OdometryConfig
 
+_REFINE_ITERATIONS = 8
+
 
 @dataclass(frozen=True, slots=True)
 class Located:
@@ -55,8 +57,7 @@ class Locator:
         pnp = self.pnp.solve(kf.points[t], xy[q], min_inliers=self.cfg.min_inliers, prior=prior)
         if pnp is None:
             return f"{len(xy)} features, {len(q)} matches, < {self.cfg.min_inliers} PnP inliers"
-        if self.cfg.depth_refine:
-            pnp = self._with_depth(pnp, kf.points[t[pnp.inliers]], xy[q[pnp.inliers]], depth)
+        pnp = self._with_depth(pnp, kf.points[t[pnp.inliers]], xy[q[pnp.inliers]], depth)
         return Located(kf, pnp, q, t)
 
     def _with_depth(
@@ -66,18 +67,23 @@ class Locator:
         xy: npt.NDArray[np.float32],
         depth: npt.NDArray[np.float32],
     ) -> PnpResult:
-        """Refine a PnP pose with the current depth at its inlier keypoints (odometry_refine)."""
+        """Refine a PnP pose with the current depth at its inlier keypoints, if configured.
+
+        The pose gets its information as a pose-graph edge either way.
+        """
         z = self.extractor.lift(xy, depth)[:, 2]
-        if int(np.isfinite(z).sum()) < self.cfg.min_inliers:
-            return pnp
-        pose, _ = refine_with_depth(
+        refine = self.cfg.depth_refine and int(np.isfinite(z).sum()) >= self.cfg.min_inliers
+        refined = refine_with_depth(
             points,
             self.extractor.normalised(xy),
             z,
             camera_from_reference=pnp.camera_from_reference,
             focal_px=self.extractor.intrinsics.fx,
+            iterations=_REFINE_ITERATIONS if refine else 0,  # else keep the PnP pose
         )
-        return PnpResult(pose, pnp.inliers, pnp.rms_px)
+        return PnpResult(
+            refined.camera_from_reference, pnp.inliers, pnp.rms_px, refined.information
+        )
 
     def _match(
         self,

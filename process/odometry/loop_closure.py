@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import Intrinsics
 from process.geometry import rigid_inverse
 from process.odometry.features import Keyframe
-from process.odometry.matching import match
-from process.odometry.pnp import PnpSolver, information_from_points
+from process.odometry.matching import guided_match, match
+from process.odometry.pnp import PnpResult, PnpSolver
 from process.odometry.pose_graph import Edge, PoseGraph
 from process.odometry.pose_refine import refine_with_depth
 
@@ -50,50 +52,100 @@ def loop_candidates(
     return ids
 
 
-def find_loop(
+def find_loops(
     current: Keyframe,
     candidates: Sequence[Keyframe],
     *,
     pnp: PnpSolver,
     match_ratio: float,
     min_inliers: int,
-) -> tuple[Edge, int] | None:
-    """Return the best verified loop edge (current -> an old keyframe) and its inlier count.
+    guide: Guide | None = None,
+) -> list[tuple[Edge, int]]:
+    """Return the verified loop edges (current -> old keyframes) and inlier counts, most first.
 
-    Each candidate is verified by PnP of its 3-D points against the current keypoints; only the
-    candidate with the most inliers is kept: the nearest view gives the most precise edge.
+    Each candidate is verified by PnP of its 3-D points against the current keypoints, refined
+    with the current keyframe's depth. With a guide (the graph's current poses), features are
+    first matched by projection around the pose the graph predicts and that pose seeds PnP, as
+    in tracking: on texture that repeats (the desk's keyboard, book spines) all-against-all
+    matching can reach a consensus that is degrees off. Where that finds fewer matches than
+    min_inliers (the graph has drifted far), all-against-all matching is the fallback.
     """
-    best: tuple[Edge, int] | None = None
+    found: list[tuple[Edge, int]] = []
     for old in candidates:
-        q, t = match(current.descriptors, old.descriptors, ratio=match_ratio)
-        result = pnp.solve(old.points[t], current.xy[q], min_inliers=min_inliers)
-        if result is None or (best is not None and len(result.inliers) <= best[1]):
+        prior = guide.camera_from(current.id, old.id) if guide is not None else None
+        verified = _verify(current, old, pnp, match_ratio, min_inliers, prior, guide)
+        if verified is None:
             continue
+        (q, t), result = verified
         inliers_q, inliers_t = q[result.inliers], t[result.inliers]
-        support = information_from_points(old.points[inliers_t])
-        # As for odometry edges: the current keyframe's own depth at the inliers refines the pose.
         k = pnp.camera_matrix
         xy = current.xy[inliers_q].astype(np.float64)
         normalised = np.stack([(xy[:, 0] - k[0, 2]) / k[0, 0], (xy[:, 1] - k[1, 2]) / k[1, 1]], 1)
-        camera_from_old, _ = refine_with_depth(
+        refined = refine_with_depth(
             old.points[inliers_t],
             normalised.astype(np.float32),
             current.points[inliers_q, 2],
             camera_from_reference=result.camera_from_reference,
             focal_px=float(k[0, 0]),
         )
-        old_from_current = rigid_inverse(camera_from_old)
-        best = Edge(current.id, old.id, old_from_current, support, True), len(result.inliers)
-    return best
+        old_from_current = rigid_inverse(refined.camera_from_reference)
+        edge = Edge(current.id, old.id, old_from_current, refined.information, True)
+        found.append((edge, len(result.inliers)))
+    return sorted(found, key=lambda f: -f[1])
+
+
+@dataclass(frozen=True, slots=True)
+class Guide:
+    """The graph's current poses, to predict where an old keyframe's points appear."""
+
+    poses: Sequence[npt.NDArray[np.float64]]
+    intrinsics: Intrinsics
+    radius_px: float
+
+    def camera_from(self, current: int, old: int) -> npt.NDArray[np.float64]:
+        """Return the predicted pose of keyframe `old` in keyframe `current`'s camera."""
+        return rigid_inverse(self.poses[current]) @ self.poses[old]
+
+
+def _verify(
+    current: Keyframe,
+    old: Keyframe,
+    pnp: PnpSolver,
+    match_ratio: float,
+    min_inliers: int,
+    prior: npt.NDArray[np.float64] | None,
+    guide: Guide | None,
+) -> tuple[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], PnpResult] | None:
+    """Return the matches and PnP pose of old's points in current, or None below min_inliers."""
+    if prior is not None and guide is not None and guide.radius_px > 0:
+        q, t = guided_match(
+            old.points,
+            old.descriptors,
+            current.xy,
+            current.descriptors,
+            camera_from_points=prior,
+            intrinsics=guide.intrinsics,
+            radius_px=guide.radius_px,
+            ratio=match_ratio,
+        )
+        if len(q) >= min_inliers:  # the prediction held: no need to search the whole image
+            result = pnp.solve(old.points[t], current.xy[q], min_inliers=min_inliers, prior=prior)
+            return None if result is None else ((q, t), result)
+    q, t = match(current.descriptors, old.descriptors, ratio=match_ratio)
+    result = pnp.solve(old.points[t], current.xy[q], min_inliers=min_inliers, prior=prior)
+    return None if result is None else ((q, t), result)
 
 
 class LoopCloser:
     """Search each new keyframe's place among old keyframes; on a match, optimise the graph."""
 
-    def __init__(self, cfg: OdometryConfig, *, pnp: PnpSolver, graph: PoseGraph) -> None:
+    def __init__(
+        self, cfg: OdometryConfig, *, pnp: PnpSolver, graph: PoseGraph, intrinsics: Intrinsics
+    ) -> None:
         self.cfg = cfg
         self.pnp = pnp
         self.graph = graph
+        self.intrinsics = intrinsics
         self._cooldown = 0
 
     def close(self, kf: Keyframe, keyframes: Sequence[Keyframe]) -> str:
@@ -114,23 +166,29 @@ class LoopCloser:
             radius_m=cfg.loop_search_radius_m,
         )
         candidates = [keyframes[i] for i in ids]
-        found = find_loop(
+        found = find_loops(
             kf,
             candidates,
             pnp=self.pnp,
             match_ratio=cfg.match_ratio,
             min_inliers=cfg.loop_min_inliers,
+            guide=Guide(self.graph.poses, self.intrinsics, cfg.loop_guided_radius_px),
         )
-        if found is None:
+        if not found:
             return ""
-        edge, n_inliers = found
-        self.graph.add_edge(edge)
+        edges = [edge for edge, _ in found[: cfg.loop_edges]]
+        for edge in edges:
+            self.graph.add_edge(edge)
+        edge, n_inliers = found[0]
+        # The keyframes before the loops' oldest end keep their poses: only the loops move.
         moved_m, kept = self.graph.optimise(
             max_correspondence_m=cfg.loop_max_correspondence_m,
             prune_threshold=cfg.loop_prune_threshold,
+            first_free=min(e.target for e in edges),
         )
         self._cooldown = cfg.loop_cooldown
         return (
-            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers);"
+            f"loop closure: keyframe {kf.id} matched keyframe {edge.target} ({n_inliers} inliers)"
+            f"{f' and {len(edges) - 1} more' if len(edges) > 1 else ''};"
             f" {kept} loop edge(s) kept, keyframes moved by up to {moved_m:.3f} m"
         )

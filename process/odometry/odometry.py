@@ -6,9 +6,13 @@ there is no prediction); PnP RANSAC, with the prediction as a second hypothesis,
 Gauss-Newton refines it on the inliers' reprojection and the current depth
 (process.odometry.locate). Open3D's RGB-D odometry on half-size images then refines it densely
 (process.odometry.dense). A frame becomes a keyframe when it has moved or turned enough, sees too
-little of the reference, or keeps too few inliers; it enters a pose graph. New keyframes are
-compared with old ones (thumbnail similarity and pose proximity, verified by PnP); a loop closure
-adds an edge and the graph is optimised (GTSAM, sparse: process.odometry.loop_closure).
+little of the reference, or keeps too few inliers; it enters a pose graph, its edge weighted by
+the refinement's information (Gauss-Newton Hessian). A keyframe whose pose the dense step could
+not correct is also located against the two keyframes before its parent, and that stretch of the
+graph is optimised with older keyframes held (process.odometry.covisibility). New keyframes are
+compared with old ones (thumbnail similarity and pose proximity, verified by PnP on features
+matched around the graph's prediction first); a loop closure adds an edge and the loop is
+optimised (GTSAM, sparse: process.odometry.loop_closure).
 When tracking fails
 the odometry tries the recent keyframes and, after a while, starts a new segment; each of these is
 an event on the timeline. Every pose is stored relative to its keyframe, so `finish()` returns all

@@ -22,6 +22,9 @@ class PnpResult:
     camera_from_reference: npt.NDArray[np.float64]  # (4, 4)
     inliers: npt.NDArray[np.int64]  # indices into the matches given
     rms_px: float
+    # (6, 6) of reference_from_camera as a pose-graph edge (process.odometry.pose_refine), or
+    # None until the pose is refined with depth
+    information: npt.NDArray[np.float64] | None = None
 
     @property
     def reference_from_camera(self) -> npt.NDArray[np.float64]:
@@ -149,23 +152,3 @@ def to_matrix(
     out[:3, :3] = np.asarray(cv2.Rodrigues(np.asarray(rvec, np.float64))[0], np.float64)
     out[:3, 3] = np.asarray(tvec, np.float64).ravel()
     return out
-
-
-def information_from_points(points: npt.NDArray[np.float32]) -> npt.NDArray[np.float64]:
-    """Return the 6x6 information of a rigid alignment supported by these points (target frame).
-
-    The same sum of G^T G over correspondences as Open3D's
-    get_information_matrix_from_point_clouds, computed here from matched points instead of clouds.
-    """
-    p = np.asarray(points, np.float64)
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    zero, one = np.zeros_like(x), np.ones_like(x)
-    g = np.stack(
-        [
-            np.stack([zero, z, -y, one, zero, zero], axis=1),
-            np.stack([-z, zero, x, zero, one, zero], axis=1),
-            np.stack([y, -x, zero, zero, zero, one], axis=1),
-        ],
-        axis=1,
-    )  # (N, 3, 6)
-    return np.asarray(np.einsum("nri,nrj->ij", g, g), np.float64)

@@ -44,8 +44,14 @@ class PoseGraph:
         """Return how many loop-closure constraints the graph holds."""
         return sum(e.uncertain for e in self.edges)
 
-    def optimise(self, *, max_correspondence_m: float, prune_threshold: float) -> tuple[float, int]:
-        """Optimise every pose (GTSAM, sparse Levenberg-Marquardt) and prune bad loop closures.
+    def optimise(
+        self, *, max_correspondence_m: float, prune_threshold: float, first_free: int = 0
+    ) -> tuple[float, int]:
+        """Optimise the poses (GTSAM, sparse Levenberg-Marquardt) and prune bad loop closures.
+
+        Keyframes before `first_free` are held where they are and only edges reaching a later
+        keyframe take part (a local optimisation whose cost does not grow with the map); with 0
+        every pose is optimised.
 
         Loop closures get a Geman-McClure kernel whose weight (mu / (mu + chi2))^2 is the line
         process of Open3D's global_optimization (Choi et al. 2015), with Open3D's scale mu =
@@ -58,16 +64,17 @@ class PoseGraph:
         if len(self.poses) < 2 or not self.edges:
             return 0.0, self.n_loops
         mu = max_correspondence_m**2 * float(np.mean([e.information[5, 5] for e in self.edges]))
-        new = _solve(self.poses, self.edges, mu)
-        kept = [
-            e for e in self.edges if not e.uncertain or _line_process(e, new, mu) >= prune_threshold
-        ]
-        if len(kept) < len(self.edges):
-            new = _solve(self.poses, kept, mu)
+        local = [e for e in self.edges if max(e.source, e.target) >= first_free]
+        new = _solve(self.poses, local, mu, first_free)
+        pruned = [e for e in local if e.uncertain and _line_process(e, new, mu) < prune_threshold]
+        if pruned:
+            local = [e for e in local if all(e is not p for p in pruned)]
+            new = _solve(self.poses, local, mu, first_free)
         moved = max(
             float(np.linalg.norm(a[:3, 3] - b[:3, 3])) for a, b in zip(new, self.poses, strict=True)
         )
-        self.poses, self.edges = new, kept
+        self.poses = new
+        self.edges = [e for e in self.edges if all(e is not p for p in pruned)]
         return moved, self.n_loops
 
 
@@ -94,20 +101,25 @@ def _factor(edge: Edge, noise: gtsam.noiseModel.Base) -> gtsam.BetweenFactorPose
 
 
 def _solve(
-    poses: Sequence[npt.NDArray[np.float64]], edges: Sequence[Edge], mu: float
+    poses: Sequence[npt.NDArray[np.float64]], edges: Sequence[Edge], mu: float, first_free: int
 ) -> list[npt.NDArray[np.float64]]:
-    """Return the poses that best agree with the edges, keyframe 0 held fixed."""
+    """Return the poses that best agree with the edges; keyframe 0 and those < first_free held."""
     graph = gtsam.NonlinearFactorGraph()
     initial = gtsam.Values()
-    for i, pose in enumerate(poses):
-        initial.insert(i, gtsam.Pose3(pose))
-    graph.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(poses[0]), _FIXED))
+    nodes = {i for e in edges for i in (e.source, e.target)} | set(range(first_free, len(poses)))
+    for i in sorted(nodes | {0}):
+        initial.insert(i, gtsam.Pose3(poses[i]))
+        if i == 0 or i < first_free:
+            graph.add(gtsam.PriorFactorPose3(i, gtsam.Pose3(poses[i]), _FIXED))
     for edge in edges:
         graph.add(_factor(edge, _noise(edge, mu)))
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(100)
     result = gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
-    return [np.asarray(result.atPose3(i).matrix(), np.float64) for i in range(len(poses))]
+    return [
+        np.asarray(result.atPose3(i).matrix(), np.float64) if i in nodes else pose
+        for i, pose in enumerate(poses)
+    ]
 
 
 def _line_process(edge: Edge, poses: Sequence[npt.NDArray[np.float64]], mu: float) -> float:

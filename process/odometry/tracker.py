@@ -10,12 +10,12 @@ import numpy.typing as npt
 
 from capture.recording import RgbdFrame
 from process.geometry import rigid_inverse
+from process.odometry.covisibility import link_recent
 from process.odometry.dense import DenseAligner, pose_difference
 from process.odometry.features import FeatureExtractor, Keyframe, thumbnail
 from process.odometry.keyframes import FeatureCheck, needs_keyframe, refine_densely
 from process.odometry.locate import Located, Locator
 from process.odometry.loop_closure import LoopCloser
-from process.odometry.pnp import information_from_points
 from process.odometry.pose_graph import Edge, PoseGraph
 from process.odometry.state import TrackState, match_arrays
 
@@ -68,7 +68,9 @@ class Tracker:
         self._segment = 0
         self._dense_refused = 0  # dense corrections of frames refused in a row
         self._dense_pause = 0  # frames left without dense refinement
-        self.loops = LoopCloser(cfg, pnp=self.locator.pnp, graph=self.graph)
+        self.loops = LoopCloser(
+            cfg, pnp=self.locator.pnp, graph=self.graph, intrinsics=extractor.intrinsics
+        )
 
     def step(
         self, gray: npt.NDArray[np.uint8], depth: npt.NDArray[np.float32], frame: RgbdFrame
@@ -252,7 +254,7 @@ class Tracker:
         self, found: Located, kf_from_camera: npt.NDArray[np.float64], image: _Image
     ) -> str | None:
         """Make the image a keyframe; return None if it cannot be, else the loop event or ""."""
-        parent = found.keyframe
+        parent, features_only = found.keyframe, kf_from_camera
         dense = self.dense.prepare(image.gray, image.depth) if self.cfg.dense_refine else None
         if dense is not None and parent.dense is not None and self._dense_pause == 0:
             kf_from_camera = refine_densely(
@@ -269,8 +271,18 @@ class Tracker:
         if kf is None:
             return None
         kf.dense = dense
-        support = information_from_points(parent.points[found.train[found.pnp.inliers]])
-        self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, support, False))
+        assert found.pnp.information is not None  # Locator gives every pose its information
+        self.graph.add_edge(Edge(kf.id, parent.id, kf_from_camera, found.pnp.information, False))
+        if kf_from_camera is features_only:  # a dense correction needs no more support
+            link_recent(
+                kf,
+                parent,
+                (image.xy, image.descriptors, image.depth),
+                keyframes=self.keyframes,
+                graph=self.graph,
+                locator=self.locator,
+                cfg=self.cfg,
+            )
         return self.loops.close(kf, self.keyframes)
 
     def _initialise(self, image: _Image) -> TrackState:

@@ -1,6 +1,6 @@
 """Odometry on a real slice: the first 60 frames of TUM fr1_rpy (Kinect v1, fast rotation).
 
-Measured on this slice: ATE 2.0 cm (Open3D's frame-to-frame odometry: several cm), about
+Measured on this slice: ATE 2.5 cm (Open3D's frame-to-frame odometry: several cm), about
 1 s of tracking. A blank frame in the middle (lens covered, depth lost) must be marked lost,
 keep the last good pose, and leave the rest of the trajectory where it was.
 """
@@ -18,7 +18,7 @@ from capture.recording import RgbdFrame
 
 FRAMES = 60
 BLANK = 30  # index of the frame blanked in the second run
-ATE_BOUND_M = 0.03  # measured 0.020
+ATE_BOUND_M = 0.03  # measured 0.025 (the whole sequence: 0.020)
 MAX_SHIFT_M = 0.005  # how far the blank frame may move the poses around it (measured 1.7 mm)
 
 
