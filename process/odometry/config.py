@@ -95,6 +95,9 @@ class OdometryConfig:
     loop_guided_radius_px: float = 60.0  # match around the graph's prediction first (0: never)
     loop_max_correspondence_m: float = 0.05  # line-process scale (Open3D's meaning)
     loop_prune_threshold: float = 0.25
+    # Seconds the colour camera takes to read its rows (rolling shutter; 0: global shutter).
+    # None: the recording's `device` metadata says (rolling_shutter_readout_s), else 0.
+    rolling_shutter_readout_s: float | None = None
 
     def __post_init__(self) -> None:
         for name, (lo, hi) in _RANGES.items():
@@ -108,6 +111,13 @@ class OdometryConfig:
             "dense_method",
             f"one of {DENSE_METHODS}",
             self.dense_method,
+        )
+        readout = self.rolling_shutter_readout_s
+        _check(
+            readout is None or 0.0 <= readout <= 0.1,
+            "rolling_shutter_readout_s",
+            "None or in [0, 0.1] s",
+            readout,
         )
         _check(self.dense_scale in (1, 2, 4, 8), "dense_scale", "1, 2, 4 or 8", self.dense_scale)
         for name in ("dense_iterations", "dense_frame_iterations"):

@@ -34,10 +34,12 @@ def link_recent(
     graph: PoseGraph,
     locator: Locator,
     cfg: OdometryConfig,
+    twist: npt.NDArray[np.float64] | None = None,
 ) -> int:
     """Add edges from kf to up to cfg.covisible_keyframes recent keyframes; return how many.
 
-    image is the new keyframe's (keypoints, descriptors, depth). A keyframe is linked only when
+    image is the new keyframe's (keypoints, descriptors, depth); twist its camera's motion per
+    second, for a rolling shutter (process.odometry.rolling_shutter). A keyframe is linked only when
     it is located with at least cfg.keyframe_min_inliers inliers; the linked stretch is then
     optimised (keyframes before the oldest linked one held).
     """
@@ -49,7 +51,7 @@ def link_recent(
     linked = []
     for other in recent:
         prior = rigid_inverse(graph.poses[kf.id]) @ graph.poses[other.id]
-        found = locator.locate(other, xy, descriptors, depth, prior=prior)
+        found = locator.locate(other, xy, descriptors, depth, prior=prior, twist=twist)
         if isinstance(found, str) or len(found.pnp.inliers) < cfg.keyframe_min_inliers:
             continue
         assert found.pnp.information is not None  # Locator gives every pose its information

@@ -24,12 +24,14 @@ def guided_match(
     intrinsics: Intrinsics,
     radius_px: float,
     ratio: float,
+    offset_px: npt.NDArray[np.float64] | None = None,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Match reference features to the current ones found near where a predicted pose puts them.
 
     Like ORB-SLAM's search by projection: each reference point is projected with the prediction
     and compared only with the current keypoints within radius_px, so a repeated pattern
-    elsewhere in the image cannot claim it. Returns (current index, reference index).
+    elsewhere in the image cannot claim it. offset_px (M, 2), if given, is added to the
+    projections (a rolling shutter's displacement). Returns (current index, reference index).
     """
     empty = np.zeros(0, np.int64), np.zeros(0, np.int64)
     if len(points) == 0 or len(xy) < 2:
@@ -37,6 +39,8 @@ def guided_match(
     p = transform_points(camera_from_points, points.astype(np.float32, copy=False))
     front = np.flatnonzero(p[:, 2] > 0.05)
     uv = project(p[front], intrinsics)
+    if offset_px is not None:
+        uv = (uv + offset_px[front]).astype(np.float32)
     k = min(_GUIDED_NEIGHBOURS, len(xy))
     dist_px, near = cKDTree(xy).query(uv, k=k, distance_upper_bound=radius_px)
     valid = np.isfinite(dist_px)

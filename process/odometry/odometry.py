@@ -35,6 +35,7 @@ from process.odometry.config import OdometryConfig
 from process.odometry.dense import DenseAligner
 from process.odometry.features import FeatureExtractor, Keyframe
 from process.odometry.pose_graph import PoseGraph
+from process.odometry.rolling_shutter import RollingShutter
 from process.odometry.state import TrackState
 from process.odometry.tracker import Tracker
 from process.odometry.undistort import Undistorter
@@ -69,7 +70,17 @@ class Odometry:
         *,
         intrinsics: Intrinsics,
         world_from_first: npt.NDArray[np.float64] | None = None,
+        recording_readout_s: float | None = None,
     ) -> None:
+        """Set up the odometry of one camera.
+
+        Args:
+            cfg: the [odometry] settings.
+            intrinsics: the colour camera's.
+            world_from_first: where the first camera is in the map's world (None: identity).
+            recording_readout_s: the colour camera's rolling-shutter readout time from the
+                recording's metadata, used unless cfg.rolling_shutter_readout_s is set.
+        """
         self.cfg = cfg
         self.intrinsics = intrinsics
         self.world_from_first = np.eye(4) if world_from_first is None else world_from_first
@@ -92,7 +103,10 @@ class Odometry:
             quick_iterations=cfg.dense_frame_iterations,
             method=cfg.dense_method,
         )
-        self._tracker = Tracker(cfg, extractor=extractor, dense=dense)
+        readout = cfg.rolling_shutter_readout_s
+        self.readout_s = float((recording_readout_s or 0.0) if readout is None else readout)
+        shutter = RollingShutter(pinhole, self.readout_s) if self.readout_s > 0 else None
+        self._tracker = Tracker(cfg, extractor=extractor, dense=dense, shutter=shutter)
         self._frames: list[tuple[int, int, npt.NDArray[np.float64]]] = []  # stamp, kf, kf_from_cam
 
     @property
