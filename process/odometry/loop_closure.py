@@ -129,7 +129,14 @@ def _verify(
             ratio=match_ratio,
         )
         if len(q) >= min_inliers:  # the prediction held: no need to search the whole image
-            result = pnp.solve(old.points[t], current.xy[q], min_inliers=min_inliers, prior=prior)
+            # A hypothesis grown from the prediction with min_inliers verifies the loop already.
+            result = pnp.solve(
+                old.points[t],
+                current.xy[q],
+                min_inliers=min_inliers,
+                prior=prior,
+                prior_enough=min_inliers,
+            )
             return None if result is None else ((q, t), result)
     q, t = match(current.descriptors, old.descriptors, ratio=match_ratio)
     result = pnp.solve(old.points[t], current.xy[q], min_inliers=min_inliers, prior=prior)

@@ -49,6 +49,7 @@ class PnpSolver:
         *,
         min_inliers: int,
         prior: npt.NDArray[np.float64] | None = None,
+        prior_enough: int | None = None,
     ) -> PnpResult | None:
         """Return the pose mapping reference points onto pixels, or None with < min_inliers.
 
@@ -56,13 +57,16 @@ class PnpSolver:
         grown from the matches that the prior already explains. On repetitive texture (floor
         planks, book spines) RANSAC can find a consensus of matches shifted by one period, as
         large as the true one; the prior's hypothesis wins unless it has clearly fewer inliers.
+        RANSAC is not tried when the prior's hypothesis explains half the matches, or at least
+        prior_enough of them.
         """
         if len(points) < max(min_inliers, 6):
             return None
         obj = np.ascontiguousarray(points, np.float64)
         img = np.ascontiguousarray(xy, np.float64)
         predicted = self._from_prior(obj, img, prior, min_inliers) if prior is not None else None
-        if predicted is not None and len(predicted.inliers) >= _PRIOR_ENOUGH * len(obj):
+        enough = min(_PRIOR_ENOUGH * len(obj), prior_enough or len(obj))
+        if predicted is not None and len(predicted.inliers) >= enough:
             return predicted  # the camera moved as predicted: no need for RANSAC
         seed = self._ransac(obj, img, min_inliers)
         found = self._refine(obj, img, seed, min_inliers) if seed is not None else None
