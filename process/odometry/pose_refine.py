@@ -25,6 +25,7 @@ _SIGMA_DISPARITY_PX = 0.05
 _HUBER = 2.0  # in sigmas
 _MIN_DEPTHS = 6  # fewer keypoints with depth: the sensor's noise is assumed
 _ITERATIONS = 8
+_CONVERGED = 1e-6  # a smaller step (rad, m) moves a keypoint by < 0.001 px: stop
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +96,7 @@ def refine_with_depth(
         update[:3, :3] = Rotation.from_rotvec(step[:3]).as_matrix()
         update[:3, 3] = step[3:]
         pose = update @ pose
-        if np.linalg.norm(step) < 1e-9:
+        if np.linalg.norm(step) < _CONVERGED:
             break
     residual, jac = residuals(pose)
     return Refined(pose, _huber_cost(residual), _information(residual, jac))
