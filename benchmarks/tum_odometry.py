@@ -24,7 +24,7 @@ import open3d as o3d
 
 from benchmarks.common import Row
 from capture.importers import _read_color, _read_depth_mm
-from capture.importers.tum import _load_tum
+from capture.importers.tum import TUM_COLOR_READOUT_S, _load_tum
 from capture.recording import GroundTruth, RgbdFrame
 from process.depth import DepthConfig, DepthProcessor
 from process.odometry.config import OdometryConfig
@@ -86,7 +86,11 @@ def run_odometry(frames: Iterator[RgbdFrame], cfg: OdometryConfig | None = None)
     for frame in frames:
         t0 = time.perf_counter()
         if odometry is None:
-            odometry = Odometry(cfg or OdometryConfig(), intrinsics=frame.color_intrinsics)
+            odometry = Odometry(
+                cfg or OdometryConfig(),
+                intrinsics=frame.color_intrinsics,
+                recording_readout_s=TUM_COLOR_READOUT_S,  # as the importer records it
+            )
         result = odometry.track(frame, processor.process(frame))
         wall += time.perf_counter() - t0
         stamps.append(frame.stamp_ns)

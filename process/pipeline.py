@@ -35,6 +35,7 @@ from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.fusion.keyframes import KeyframeFusion, LabelledKeyframe
 from process.fusion.schedule import SegmentationSchedule
 from process.odometry.odometry import Odometry, TrackResult
+from process.odometry.rolling_shutter import recorded_readout_s
 from process.preview import write_preview
 from process.streaming import Worker, prefetch
 from process.trajectory import Trajectory, ate_rmse, path_length, rpe, write_tum
@@ -99,6 +100,7 @@ class ReplayPipeline:
         self.clock = _StageClock()
         self._frames = 0
         self._odometry: Odometry | None = None
+        self._readout_s: float | None = None  # the colour camera's, from the recording
         self._segmenter: Segmenter | None = None
         self._schedule = SegmentationSchedule(cfg.segmentation.min_new_share)
         self._seg_stats = _SegStats()
@@ -165,6 +167,7 @@ class ReplayPipeline:
     def _replay(self, rec: RecordingReader) -> Trajectory:
         """Track every frame; hand keyframes to the worker; return the ground-truth poses."""
         depth = DepthProcessor(self.cfg.depth)
+        self._readout_s = recorded_readout_s(rec.metadata)
         if "segmentation" in self.stages:
             self._segmenter = self._make_segmenter(rec)
         _limit_threads()
@@ -206,7 +209,10 @@ class ReplayPipeline:
             # The map's world is the recording's world where it has a first pose (so the map
             # meets the ground-truth cloud), else the first camera.
             self._odometry = Odometry(
-                self.cfg.odometry, intrinsics=frame.color_intrinsics, world_from_first=gt_pose
+                self.cfg.odometry,
+                intrinsics=frame.color_intrinsics,
+                world_from_first=gt_pose,
+                recording_readout_s=self._readout_s,
             )
             self.viz.log_calibration(frame.color_intrinsics)
         self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)

@@ -105,7 +105,10 @@ def _write(dataset: _Dataset, part: Path, *, kind: str, src: Path, compression: 
     started = datetime.now(UTC).isoformat()
     poses = 0
     with RecordingWriter(part, compression=compression) as writer:
-        writer.write_metadata("device", {"name": dataset.name, "depth_scale_m": "0.001"})
+        device = {"name": dataset.name, "depth_scale_m": "0.001"}
+        if dataset.color_readout_s is not None:
+            device["rolling_shutter_readout_s"] = f"{dataset.color_readout_s:g}"
+        writer.write_metadata("device", device)
         for frame in dataset.frames:
             # The importer did the association, so the depth of a pair carries the colour stamp.
             writer.write_color(_read_color(frame.color, k), stamp_ns=frame.stamp_ns, intrinsics=k)

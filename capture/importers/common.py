@@ -35,6 +35,8 @@ class _Dataset:
     depth_units_per_m: int = 1000
     invalid_depth: int | None = None
     dropped: int = 0  # colour frames without a depth partner
+    # the colour camera's rolling-shutter readout (s), written to the `device` record; None: unknown
+    color_readout_s: float | None = None
 
 
 def detect_kind(src: Path) -> str | None:

@@ -13,6 +13,7 @@ rotation), so PnP, the depth refinement and the pose graph stay global-shutter.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,9 +22,28 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from capture.recording import Intrinsics
+from process.errors import ConfigError
 from process.geometry import project
 
 NO_MOTION: npt.NDArray[np.float64] = np.zeros(6)
+READOUT_KEY = "rolling_shutter_readout_s"  # in the recording's `device` metadata record
+
+
+def recorded_readout_s(metadata: Mapping[str, Mapping[str, str]]) -> float | None:
+    """Return the colour camera's readout time from a recording's metadata, None if unsaid."""
+    text = metadata.get("device", {}).get(READOUT_KEY)
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value <= 0.1:
+        raise ConfigError(
+            f"the recording's device metadata {READOUT_KEY} must be seconds in [0, 0.1],"
+            f" found {text!r}; set odometry.rolling_shutter_readout_s in the config to override"
+        )
+    return value
 
 
 @dataclass(frozen=True, slots=True)
