@@ -68,7 +68,7 @@ class FeatureExtractor:
         keypoints, descriptors = self.orb.detectAndCompute(gray, None)
         if descriptors is None or not keypoints:
             return np.zeros((0, 2), np.float32), np.zeros((0, 32), np.uint8)
-        xy = np.asarray(cv2.KeyPoint_convert(keypoints), np.float32).reshape(-1, 2)
+        xy = np.asarray(cv2.KeyPoint.convert(keypoints), np.float32).reshape(-1, 2)
         return xy, np.asarray(descriptors, np.uint8)
 
     def lift(

@@ -21,14 +21,18 @@ READOUT_S = 0.028
 TWIST = np.array([0.8, 3.0, 0.4, 0.05, -0.02, 0.03])
 
 
-def _pose(rotvec: tuple[float, float, float], t: tuple[float, float, float]) -> npt.NDArray:
+def _pose(
+    rotvec: tuple[float, float, float], t: tuple[float, float, float]
+) -> npt.NDArray[np.float64]:
     out = np.eye(4)
     out[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
     out[:3, 3] = t
     return out
 
 
-def _exact_rolling_shutter(points: npt.NDArray, camera_from_points: npt.NDArray) -> npt.NDArray:
+def _exact_rolling_shutter(
+    points: npt.NDArray[np.float64], camera_from_points: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float32]:
     """Render pixels the exact way: each point seen at its own row's time (exact exponential)."""
     q = points @ camera_from_points[:3, :3].T + camera_from_points[:3, 3]
     v = K.fy * q[:, 1] / q[:, 2] + K.cy
@@ -40,7 +44,7 @@ def _exact_rolling_shutter(points: npt.NDArray, camera_from_points: npt.NDArray)
     return np.stack([K.fx * seen[:, 0] / seen[:, 2] + K.cx, v], axis=1).astype(np.float32)
 
 
-def _scene(rng: np.random.Generator) -> tuple[Keyframe, npt.NDArray]:
+def _scene(rng: np.random.Generator) -> tuple[Keyframe, npt.NDArray[np.uint8]]:
     """Return a keyframe at the origin seeing 600 points 1.5-4 m away, and their descriptors."""
     n = 600
     xy = rng.uniform([20, 20], [620, 460], size=(n, 2))
@@ -48,12 +52,19 @@ def _scene(rng: np.random.Generator) -> tuple[Keyframe, npt.NDArray]:
     points = np.stack([(xy[:, 0] - K.cx) / K.fx * z, (xy[:, 1] - K.cy) / K.fy * z, z], 1)
     descriptors = rng.integers(0, 256, size=(n, 32), dtype=np.uint8)
     kf = Keyframe(
-        0, 0, 0, 0, xy.astype(np.float32), descriptors, points.astype(np.float32), np.zeros(768)
+        0,
+        0,
+        0,
+        0,
+        xy.astype(np.float32),
+        descriptors,
+        points.astype(np.float32),
+        np.zeros(768, np.float32),
     )
     return kf, descriptors
 
 
-def _pose_error(a: npt.NDArray, b: npt.NDArray) -> tuple[float, float]:
+def _pose_error(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> tuple[float, float]:
     delta = np.linalg.inv(a) @ b
     return float(np.linalg.norm(delta[:3, 3])), float(
         np.degrees(Rotation.from_matrix(delta[:3, :3]).magnitude())
