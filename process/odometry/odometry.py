@@ -8,7 +8,7 @@ Gauss-Newton refines it on the inliers' reprojection and the current depth
 (process.odometry.dense). A frame becomes a keyframe when it has moved or turned enough, sees too
 little of the reference, or keeps too few inliers; it enters a pose graph, its edge weighted by
 the refinement's information (Gauss-Newton Hessian). A keyframe whose pose the dense step could
-not correct is also located against the two keyframes before its parent, and that stretch of the
+not correct is also located against the keyframe(s) before its parent, and that stretch of the
 graph is optimised with older keyframes held (process.odometry.covisibility). New keyframes are
 compared with old ones (thumbnail similarity and pose proximity, verified by PnP on features
 matched around the graph's prediction first); a loop closure adds an edge and the loop is
