@@ -34,6 +34,7 @@ class RefineConfig:
     table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
     table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
     # points become table (on TUM fr1_rpy the networks call the desk wall and clutter)
+    table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift)
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
@@ -101,6 +102,7 @@ class RefineConfig:
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
+            "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),

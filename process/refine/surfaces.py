@@ -3,7 +3,7 @@
 Real-image networks call much of a white desk "wall" or clutter: on TUM `fr1_rpy` the desk is
 a level plane 0.74 m above the floor whose points the network labels wall, clutter and table
 by turns, and the plane step left it to the objects as it is neither floor nor ceiling. Here
-a plane that is level (within `horizontal_tolerance_deg` of gravity) and not structural is
+a plane that is level (within `table_tolerance_deg` of gravity) and not structural is
 cut into connected pieces (gaps over ~10 cm separate); a piece whose median height above the
 floor plane lies in `table_heights_m` and whose surface, at the cloud's density, reaches
 `table_min_area_m2` is a table surface. Its points labelled structure, clutter or nothing
@@ -84,7 +84,7 @@ def _surface(
     """Return the inliers of the plane's pieces that are table surfaces, and why (or why not)."""
     none = np.zeros(0, np.intp)
     tilt = math.degrees(math.acos(min(1.0, abs(float(plane.model[:3] @ up)))))
-    if tilt > cfg.horizontal_tolerance_deg:
+    if tilt > cfg.table_tolerance_deg:
         return none, f"not level ({tilt:.0f} deg from gravity)"
     idx = plane.indices
     for wall in walls:  # the band where the plane crosses a wall stays wall
