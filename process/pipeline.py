@@ -164,7 +164,6 @@ class ReplayPipeline:
     # -- the pass over the frames ------------------------------------------------------------
     def _replay(self, rec: RecordingReader) -> Trajectory:
         """Track every frame; hand keyframes to the worker; return the ground-truth poses."""
-        depth = DepthProcessor(self.cfg.depth)
         if "segmentation" in self.stages:
             self._segmenter = self._make_segmenter(rec)
         _limit_threads()
@@ -173,34 +172,46 @@ class ReplayPipeline:
         total = None if rec.following else len(rec)
         bar = tqdm(total=total, unit="frame", dynamic_ncols=True, disable=not self.progress)
         with bar:  # closed on errors too, so that an error line starts a line of its own
-            for frame in self._timed_frames(rec):
+            for frame, depth_m in self._timed_frames(rec):
                 gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
                 if gt_pose is not None:
                     gt_stamps.append(frame.stamp_ns)
                     gt_poses.append(gt_pose)
-                self._track(frame, depth, gt_pose)
+                self._track(frame, depth_m, gt_pose)
                 bar.update()
                 if rec.following:
                     self._lag_s.append((time.time_ns() - frame.stamp_ns) / 1e9)
         return Trajectory.of(gt_stamps, gt_poses)
 
-    def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
-        """Yield the recording's frames, read and decoded ahead on a thread (stage "read")."""
-        for frame in prefetch(self._read(rec), name="read", stop=self.stop):
-            self._frames += 1
-            yield frame
+    def _timed_frames(
+        self, rec: RecordingReader
+    ) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
+        """Yield the frames with their depth in the colour camera, prepared ahead on a thread.
 
-    def _read(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
+        Reading, decoding (stage "read") and registering depth (stage "depth") run on that
+        thread, so that the frame loop's thread does only the odometry.
+        """
+        for item in prefetch(self._read(rec), name="read", stop=self.stop):
+            self._frames += 1
+            yield item
+
+    def _read(self, rec: RecordingReader) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
+        depth = DepthProcessor(self.cfg.depth)
         frames = rec.frames()
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
-            yield frame
+            with self.clock("depth"):
+                depth_m = depth.process(frame)
+            yield frame, depth_m
 
     def _track(
-        self, frame: RgbdFrame, depth: DepthProcessor, gt_pose: npt.NDArray[np.float64] | None
+        self,
+        frame: RgbdFrame,
+        depth_m: npt.NDArray[np.float32],
+        gt_pose: npt.NDArray[np.float64] | None,
     ) -> None:
         if self._odometry is None:
             # The map's world is the recording's world where it has a first pose (so the map
@@ -210,8 +221,6 @@ class ReplayPipeline:
             )
             self.viz.log_calibration(frame.color_intrinsics)
         self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-        with self.clock("depth"):
-            depth_m = depth.process(frame)
         with self.clock("odometry"):
             track = self._odometry.track(frame, depth_m)
         self._log_frame(frame, depth_m, track)
