@@ -108,6 +108,7 @@ class ReplayPipeline:
         self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
         self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
         self._keyframes_skipped = 0  # following: keyframes the segmentation had no room for
+        self._frames_dropped = 0  # following: frames read too late to be tracked (FollowConfig)
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -125,6 +126,12 @@ class ReplayPipeline:
                     self._warn(text, logged=True)
                 gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
             trajectory = self._finish_odometry(ground_truth)
+            if self._frames_dropped:
+                self._warn(
+                    f"following: {self._frames_dropped} frames were read more than"
+                    f" {self.cfg.follow.max_lag_s:g} s after the camera took them and were not"
+                    " tracked, to keep up with the capture ([follow] max_lag_s)"
+                )
             if self._keyframes_skipped:
                 self._warn(
                     f"following: {self._keyframes_skipped} keyframes were left out of the map"
@@ -198,11 +205,21 @@ class ReplayPipeline:
     def _read(self, rec: RecordingReader) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
         depth = DepthProcessor(self.cfg.depth)
         frames = rec.frames()
+        max_lag_ns = int(self.cfg.follow.max_lag_s * 1e9) if rec.following else 0
+        dropped = False
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
+            # following a capture: a frame that is already too old is dropped, so that a job
+            # slower than the camera keeps up with it; never two in a row, so tracking holds
+            late = max_lag_ns > 0 and time.time_ns() - frame.stamp_ns > max_lag_ns
+            if late and not dropped:
+                self._frames_dropped += 1
+                dropped = True
+                continue
+            dropped = False
             with self.clock("depth"):
                 depth_m = depth.process(frame)
             yield frame, depth_m
@@ -438,6 +455,7 @@ class ReplayPipeline:
                 "lag_s_p95": round(float(np.percentile(lag, 95)), 3),
                 "lag_s_max": round(float(lag.max()), 3),
                 "keyframes_skipped": self._keyframes_skipped,
+                "frames_dropped": self._frames_dropped,
             }
 
         odo = self.result.metrics.get("odometry")
