@@ -9,6 +9,7 @@ final poses from the keyframes the fusion kept on disk (process.fusion.keyframes
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import logging
@@ -109,6 +110,8 @@ class ReplayPipeline:
         self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
         self._keyframes_skipped = 0  # following: keyframes the segmentation had no room for
         self._frames_dropped = 0  # following: frames read too late to be tracked (FollowConfig)
+        self._read_waited_s = 0.0  # the frame loop waited for the next frame (or the camera)
+        self._frames_done_at: float | None = None  # perf_counter when the last frame was tracked
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -149,7 +152,9 @@ class ReplayPipeline:
             self._stop_threads(failed=True)
             raise
         self._stop_threads(failed=False)
-        self._record_times(time.perf_counter() - wall0, time.process_time() - cpu0)
+        end = time.perf_counter()
+        after = end - self._frames_done_at if self._frames_done_at is not None else 0.0
+        self._record_times(end - wall0, time.process_time() - cpu0, after_frames_s=after)
         path = self.out_dir / outputs.METRICS
         outputs.write_metrics(path, self.result.metrics)
         self.result.written.append(path)
@@ -188,6 +193,7 @@ class ReplayPipeline:
                 bar.update()
                 if rec.following:
                     self._lag_s.append((time.time_ns() - frame.stamp_ns) / 1e9)
+        self._frames_done_at = time.perf_counter()
         return Trajectory.of(gt_stamps, gt_poses)
 
     def _timed_frames(
@@ -198,9 +204,15 @@ class ReplayPipeline:
         Reading, decoding (stage "read") and registering depth (stage "depth") run on that
         thread, so that the frame loop's thread does only the odometry.
         """
-        for item in prefetch(self._read(rec), name="read", stop=self.stop):
-            self._frames += 1
-            yield item
+        with contextlib.closing(prefetch(self._read(rec), name="read", stop=self.stop)) as items:
+            while True:
+                t0 = time.perf_counter()
+                item = next(items, None)
+                self._read_waited_s += time.perf_counter() - t0  # reading was the bottleneck
+                if item is None:
+                    return
+                self._frames += 1
+                yield item
 
     def _read(self, rec: RecordingReader) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
         depth = DepthProcessor(self.cfg.depth)
@@ -416,7 +428,7 @@ class ReplayPipeline:
         self._write_cloud(outputs.MAP_REFINED, refined)
         self.result.metrics["refinement"] = section
 
-    def _record_times(self, wall_s: float, cpu_s: float) -> None:
+    def _record_times(self, wall_s: float, cpu_s: float, *, after_frames_s: float) -> None:
         """Put wall time, CPU time and frames/s per stage and for the job into the metrics."""
         self.clock.add("logging", self.viz.seconds, self.viz.cpu_seconds)
         n = self._frames
@@ -432,18 +444,28 @@ class ReplayPipeline:
         self.result.metrics["stages"] = per_stage
         keyframes_behind = self._keyframes.blocked_seconds / wall_s if wall_s > 0 else 0.0
         logging_behind = self.viz.blocked_seconds / wall_s if wall_s > 0 else 0.0
+        read_behind = self._read_waited_s / wall_s if wall_s > 0 else 0.0
+        after_behind = after_frames_s / wall_s if wall_s > 0 else 0.0
+        reading = "the camera" if self.follow_idle_s is not None else "reading"
         self.result.metrics["job"] = {
             "frames": n,
             "wall_s": round(wall_s, 3),
             "cpu_s": round(cpu_s, 3),
             "fps": round(n / wall_s, 2) if wall_s > 0 else None,
             "cores_used": round(cpu_s / wall_s, 2) if wall_s > 0 else None,
-            # the share of the run the frame loop waited for a later stage (that stage was the
-            # bottleneck); the rest of the time the frame loop itself was
+            # the share of the run the frame loop waited for the frames (reading them, or the
+            # camera when following) or for a later stage (that stage was the bottleneck), and
+            # the share after the last frame (the rebuilt map, refinement, the outputs); the
+            # rest of the time the frame loop itself (the odometry) was
             "bottleneck_share": {
+                reading: round(read_behind, 3),
                 "keyframes": round(keyframes_behind, 3),
                 "logging": round(logging_behind, 3),
-                "frame loop": round(max(0.0, 1.0 - keyframes_behind - logging_behind), 3),
+                "after the frames": round(after_behind, 3),
+                "frame loop": round(
+                    max(0.0, 1.0 - read_behind - keyframes_behind - logging_behind - after_behind),
+                    3,
+                ),
             },
         }
         if self._lag_s:
