@@ -388,7 +388,8 @@ class ReplayPipeline:
         self.clock.add(stage, time.perf_counter() - wall0, time.thread_time() - cpu0)
         if self._fusion.refused:
             self.viz.log_text("loop closures moved keyframes: the map was fused again")
-        self._write_cloud(outputs.MAP_FUSED, cloud)
+        refine = "refinement" in self.stages and len(cloud) > 0
+        self._write_cloud(outputs.MAP_FUSED, cloud, preview=not refine)  # else the refined one
         self.viz.set_stage(STAGE_FUSED)
         self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
         if "refinement" not in self.stages:
@@ -403,11 +404,12 @@ class ReplayPipeline:
             return
         self._refine(cloud, gt_cloud, up=up)
 
-    def _write_cloud(self, name: str, cloud: LabelledCloud) -> None:
+    def _write_cloud(self, name: str, cloud: LabelledCloud, *, preview: bool = True) -> None:
         path = self.out_dir / name
         write_ply(path, cloud)
         self.result.written.append(path)
-        # the picture of the last map written: the refined one replaces the fused one's
+        if not preview:
+            return
         up = None if self._odometry is None else -self._odometry.world_from_first[:3, 1]
         picture = write_preview(
             self.out_dir / outputs.PREVIEW, cloud.points, cloud.labels, up_hint=up
