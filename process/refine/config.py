@@ -56,6 +56,8 @@ class RefineConfig:
     # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
+    regrow_structure: bool = False  # regrowth may turn points the network calls structure
+    # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
     seed: int = 0  # RANSAC sampling
 
     @classmethod
@@ -77,6 +79,7 @@ class RefineConfig:
             "regrow_own_class_first": False,
             "plane_object_width_m": 0.0,
             "table_surfaces": False,
+            "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})
 
