@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from helpers_refine import RecordingLogger
 from helpers_refine_sim import SimFusedMap, SimScene, sim_fused_map, sim_scene
@@ -93,3 +94,13 @@ def test_metrics_say_which_rule_chose_k_and_why(room: SimScene) -> None:
     assert section["points"]["regrown"] > 0
     regrown = [c for c in viz.calls if c[0] == "log_refine" and c[1] == "regrown"]
     assert len(regrown) == 1
+
+
+def test_refine_gives_the_same_map_twice_on_the_same_cloud(fused: SimFusedMap) -> None:
+    """Every random draw (density probes, RANSAC samples and hypotheses) follows cfg.seed."""
+    first, second = (refine(fused.cloud, RefineConfig(), up=fused.up) for _ in range(2))
+    assert np.array_equal(first.labels_iii, second.labels_iii)
+    assert np.array_equal(first.sor_outliers, second.sor_outliers)
+    assert [len(p.indices) for p in first.planes.planes] == [
+        len(p.indices) for p in second.planes.planes
+    ]
