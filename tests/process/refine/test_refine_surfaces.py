@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers_refine import grid_patch, labelled
+from helpers_refine import RecordingLogger, grid_patch, labelled
 
 from capture.recording import Label
 from process.errors import ConfigError
 from process.refine import RefineConfig, refine
-from process.refine.job import refinement_metrics
+from process.refine.job import refine_and_log, refinement_metrics
 from process.refine.planes import Plane, segment_planes
 from process.refine.surfaces import table_surfaces
 
@@ -71,8 +71,13 @@ def test_a_desk_top_labelled_wall_becomes_table_and_shelf_tray_and_bench_do_not(
 
 def test_metrics_say_which_plane_is_a_table_surface_and_why() -> None:
     points, labels, parts = _room()
+    viz = RecordingLogger()
+    _, section = refine_and_log(labelled(points, labels), CFG, viz=viz, up=UP)
+    texts = [str(c[1]) for c in viz.calls if c[0] == "log_text"]
+    assert any("not structural" in t and "; table surface: level" in t for t in texts)
     result = refine(labelled(points, labels), CFG, up=UP)
     planes = refinement_metrics(result, gt_cloud=None)["planes"]
+    assert planes == section["planes"]
     tables = [p for p in planes if p["table_points"] > 0]
     assert len(tables) == 1  # the desk and the tray are one RANSAC plane, only the desk counts
     assert tables[0]["note"].startswith("table surface: level, 0.75 m above the floor")
