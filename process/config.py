@@ -80,6 +80,20 @@ class BatchConfig:
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
+class FollowConfig:
+    """`process run --follow`: keeping up with a capture that is still being written."""
+
+    # A frame read more than this many seconds after the camera took it is dropped (not tracked,
+    # never two in a row), so that a job slower than the camera stays close behind it instead of
+    # falling further behind each second; 0 tracks every frame. Offline runs track every frame.
+    max_lag_s: float = 1.5
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.max_lag_s <= 3600.0:
+            raise ConfigError(f"follow.max_lag_s must be in 0..3600 s, got {self.max_lag_s}")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
 class ReplayConfig:
     """Every setting of `semreplay-process`, one section per stage."""
 
@@ -89,6 +103,7 @@ class ReplayConfig:
     fusion: FusionConfig = dataclasses.field(default_factory=FusionConfig)
     refine: RefineConfig = dataclasses.field(default_factory=RefineConfig)
     viz: VizConfig = dataclasses.field(default_factory=VizConfig)
+    follow: FollowConfig = dataclasses.field(default_factory=FollowConfig)
     batch: BatchConfig = dataclasses.field(default_factory=BatchConfig)
 
 

@@ -221,6 +221,8 @@ def summary_table(metrics: Mapping[str, Any], *, title: str = "semreplay process
         table.add_row(
             "whole job", "bottleneck", f"{slowest[0]} ({100 * slowest[1]:.0f} % of the run)"
         )
+    for key, value in metrics.get("follow", {}).items():  # seconds behind the camera, drops
+        table.add_row("following", key, _fmt(value))
     odo = metrics.get("odometry", {})
     for key in ("frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"):
         if odo.get(key) is not None:

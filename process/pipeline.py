@@ -9,6 +9,7 @@ final poses from the keyframes the fusion kept on disk (process.fusion.keyframes
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import logging
@@ -110,6 +111,9 @@ class ReplayPipeline:
         self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
         self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
         self._keyframes_skipped = 0  # following: keyframes the segmentation had no room for
+        self._frames_dropped = 0  # following: frames read too late to be tracked (FollowConfig)
+        self._read_waited_s = 0.0  # the frame loop waited for the next frame (or the camera)
+        self._frames_done_at: float | None = None  # perf_counter when the last frame was tracked
 
     def run(self) -> RunResult:
         """Run the stages and write the outputs; return what was written and measured."""
@@ -127,6 +131,12 @@ class ReplayPipeline:
                     self._warn(text, logged=True)
                 gt_cloud = rec.attachment(GT_CLOUD_ATTACHMENT)
             trajectory = self._finish_odometry(ground_truth)
+            if self._frames_dropped:
+                self._warn(
+                    f"following: {self._frames_dropped} frames were read more than"
+                    f" {self.cfg.follow.max_lag_s:g} s after the camera took them and were not"
+                    " tracked, to keep up with the capture ([follow] max_lag_s)"
+                )
             if self._keyframes_skipped:
                 self._warn(
                     f"following: {self._keyframes_skipped} keyframes were left out of the map"
@@ -144,7 +154,9 @@ class ReplayPipeline:
             self._stop_threads(failed=True)
             raise
         self._stop_threads(failed=False)
-        self._record_times(time.perf_counter() - wall0, time.process_time() - cpu0)
+        end = time.perf_counter()
+        after = end - self._frames_done_at if self._frames_done_at is not None else 0.0
+        self._record_times(end - wall0, time.process_time() - cpu0, after_frames_s=after)
         path = self.out_dir / outputs.METRICS
         outputs.write_metrics(path, self.result.metrics)
         self.result.written.append(path)
@@ -166,7 +178,6 @@ class ReplayPipeline:
     # -- the pass over the frames ------------------------------------------------------------
     def _replay(self, rec: RecordingReader) -> Trajectory:
         """Track every frame; hand keyframes to the worker; return the ground-truth poses."""
-        depth = DepthProcessor(self.cfg.depth)
         self._readout_s = recorded_readout_s(rec.metadata)
         if "segmentation" in self.stages:
             self._segmenter = self._make_segmenter(rec)
@@ -176,34 +187,63 @@ class ReplayPipeline:
         total = None if rec.following else len(rec)
         bar = tqdm(total=total, unit="frame", dynamic_ncols=True, disable=not self.progress)
         with bar:  # closed on errors too, so that an error line starts a line of its own
-            for frame in self._timed_frames(rec):
+            for frame, depth_m in self._timed_frames(rec):
                 gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
                 if gt_pose is not None:
                     gt_stamps.append(frame.stamp_ns)
                     gt_poses.append(gt_pose)
-                self._track(frame, depth, gt_pose)
+                self._track(frame, depth_m, gt_pose)
                 bar.update()
                 if rec.following:
                     self._lag_s.append((time.time_ns() - frame.stamp_ns) / 1e9)
+        self._frames_done_at = time.perf_counter()
         return Trajectory.of(gt_stamps, gt_poses)
 
-    def _timed_frames(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
-        """Yield the recording's frames, read and decoded ahead on a thread (stage "read")."""
-        for frame in prefetch(self._read(rec), name="read", stop=self.stop):
-            self._frames += 1
-            yield frame
+    def _timed_frames(
+        self, rec: RecordingReader
+    ) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
+        """Yield the frames with their depth in the colour camera, prepared ahead on a thread.
 
-    def _read(self, rec: RecordingReader) -> Iterator[RgbdFrame]:
+        Reading, decoding (stage "read") and registering depth (stage "depth") run on that
+        thread, so that the frame loop's thread does only the odometry.
+        """
+        with contextlib.closing(prefetch(self._read(rec), name="read", stop=self.stop)) as items:
+            while True:
+                t0 = time.perf_counter()
+                item = next(items, None)
+                self._read_waited_s += time.perf_counter() - t0  # reading was the bottleneck
+                if item is None:
+                    return
+                self._frames += 1
+                yield item
+
+    def _read(self, rec: RecordingReader) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
+        depth = DepthProcessor(self.cfg.depth)
         frames = rec.frames()
+        max_lag_ns = int(self.cfg.follow.max_lag_s * 1e9) if rec.following else 0
+        dropped = False
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
-            yield frame
+            # following a capture: a frame that is already too old is dropped, so that a job
+            # slower than the camera keeps up with it; never two in a row, so tracking holds
+            late = max_lag_ns > 0 and time.time_ns() - frame.stamp_ns > max_lag_ns
+            if late and not dropped:
+                self._frames_dropped += 1
+                dropped = True
+                continue
+            dropped = False
+            with self.clock("depth"):
+                depth_m = depth.process(frame)
+            yield frame, depth_m
 
     def _track(
-        self, frame: RgbdFrame, depth: DepthProcessor, gt_pose: npt.NDArray[np.float64] | None
+        self,
+        frame: RgbdFrame,
+        depth_m: npt.NDArray[np.float32],
+        gt_pose: npt.NDArray[np.float64] | None,
     ) -> None:
         if self._odometry is None:
             # The map's world is the recording's world where it has a first pose (so the map
@@ -216,8 +256,6 @@ class ReplayPipeline:
             )
             self.viz.log_calibration(frame.color_intrinsics)
         self.viz.set_frame(frame.index, stamp_ns=frame.stamp_ns)
-        with self.clock("depth"):
-            depth_m = depth.process(frame)
         with self.clock("odometry"):
             track = self._odometry.track(frame, depth_m)
         self._log_frame(frame, depth_m, track)
@@ -356,7 +394,8 @@ class ReplayPipeline:
         self.clock.add(stage, time.perf_counter() - wall0, time.thread_time() - cpu0)
         if self._fusion.refused:
             self.viz.log_text("loop closures moved keyframes: the map was fused again")
-        self._write_cloud(outputs.MAP_FUSED, cloud)
+        refine = "refinement" in self.stages and len(cloud) > 0
+        self._write_cloud(outputs.MAP_FUSED, cloud, preview=not refine)  # else the refined one
         self.viz.set_stage(STAGE_FUSED)
         self.viz.log_map("fused", cloud.points, colors=cloud.colors, labels=cloud.labels)
         if "refinement" not in self.stages:
@@ -371,11 +410,12 @@ class ReplayPipeline:
             return
         self._refine(cloud, gt_cloud, up=up)
 
-    def _write_cloud(self, name: str, cloud: LabelledCloud) -> None:
+    def _write_cloud(self, name: str, cloud: LabelledCloud, *, preview: bool = True) -> None:
         path = self.out_dir / name
         write_ply(path, cloud)
         self.result.written.append(path)
-        # the picture of the last map written: the refined one replaces the fused one's
+        if not preview:
+            return
         up = None if self._odometry is None else -self._odometry.world_from_first[:3, 1]
         picture = write_preview(
             self.out_dir / outputs.PREVIEW, cloud.points, cloud.labels, up_hint=up
@@ -396,7 +436,7 @@ class ReplayPipeline:
         self._write_cloud(outputs.MAP_REFINED, refined)
         self.result.metrics["refinement"] = section
 
-    def _record_times(self, wall_s: float, cpu_s: float) -> None:
+    def _record_times(self, wall_s: float, cpu_s: float, *, after_frames_s: float) -> None:
         """Put wall time, CPU time and frames/s per stage and for the job into the metrics."""
         self.clock.add("logging", self.viz.seconds, self.viz.cpu_seconds)
         n = self._frames
@@ -412,18 +452,28 @@ class ReplayPipeline:
         self.result.metrics["stages"] = per_stage
         keyframes_behind = self._keyframes.blocked_seconds / wall_s if wall_s > 0 else 0.0
         logging_behind = self.viz.blocked_seconds / wall_s if wall_s > 0 else 0.0
+        read_behind = self._read_waited_s / wall_s if wall_s > 0 else 0.0
+        after_behind = after_frames_s / wall_s if wall_s > 0 else 0.0
+        reading = "the camera" if self.follow_idle_s is not None else "reading"
         self.result.metrics["job"] = {
             "frames": n,
             "wall_s": round(wall_s, 3),
             "cpu_s": round(cpu_s, 3),
             "fps": round(n / wall_s, 2) if wall_s > 0 else None,
             "cores_used": round(cpu_s / wall_s, 2) if wall_s > 0 else None,
-            # the share of the run the frame loop waited for a later stage (that stage was the
-            # bottleneck); the rest of the time the frame loop itself was
+            # the share of the run the frame loop waited for the frames (reading them, or the
+            # camera when following) or for a later stage (that stage was the bottleneck), and
+            # the share after the last frame (the rebuilt map, refinement, the outputs); the
+            # rest of the time the frame loop itself (the odometry) was
             "bottleneck_share": {
+                reading: round(read_behind, 3),
                 "keyframes": round(keyframes_behind, 3),
                 "logging": round(logging_behind, 3),
-                "frame loop": round(max(0.0, 1.0 - keyframes_behind - logging_behind), 3),
+                "after the frames": round(after_behind, 3),
+                "frame loop": round(
+                    max(0.0, 1.0 - read_behind - keyframes_behind - logging_behind - after_behind),
+                    3,
+                ),
             },
         }
         if self._lag_s:
@@ -435,6 +485,7 @@ class ReplayPipeline:
                 "lag_s_p95": round(float(np.percentile(lag, 95)), 3),
                 "lag_s_max": round(float(lag.max()), 3),
                 "keyframes_skipped": self._keyframes_skipped,
+                "frames_dropped": self._frames_dropped,
             }
 
         odo = self.result.metrics.get("odometry")

@@ -5,6 +5,8 @@ again decodes every frame a second time; keeping the keyframes in memory grows w
 recording. Each fused keyframe is therefore written to a temporary folder instead (colour as
 JPEG, depth in millimetres and labels with their confidence as PNG: ~0.3 MB each), and when the
 final trajectory has moved any of them, the map is rebuilt from those files at the final poses.
+They are appended to one anonymous temporary file, which the system removes when it is closed
+(removing 3 files per keyframe took 0.3-0.9 s at the end of a 160-keyframe job).
 
 The votes sample every `pixel_stride`-th pixel, so keyframes are cut to those pixels on arrival
 (intrinsics scaled to match): the TSDF integrates the same rays as the votes, and storing,
@@ -13,7 +15,7 @@ loading and integrating cost a quarter at the default stride of 2.
 
 from __future__ import annotations
 
-import shutil
+import os
 import tempfile
 from collections import deque
 from collections.abc import Iterator, Mapping
@@ -58,7 +60,10 @@ class KeyframeFusion:
         self.refused = False  # whether the map was rebuilt at the final poses
         self._fused_at: dict[int, npt.NDArray[np.float64]] = {}
         self._intrinsics: dict[int, Intrinsics] = {}
-        self._folder = Path(tempfile.mkdtemp(prefix="semreplay-keyframes-"))
+        # closed by close(), which the pipeline calls after the job or a failure
+        self._file = tempfile.TemporaryFile(prefix="semreplay-keyframes-")  # noqa: SIM115
+        self._end = 0  # bytes written to the file
+        self._where: dict[tuple[int, str], tuple[int, int]] = {}  # (kf, part) -> offset, size
 
     def add(
         self, keyframe: LabelledKeyframe, *, world_from_camera: npt.NDArray[np.float64]
@@ -92,8 +97,8 @@ class KeyframeFusion:
         )
 
     def close(self) -> None:
-        """Remove the temporary keyframe files."""
-        shutil.rmtree(self._folder, ignore_errors=True)
+        """Remove the temporary keyframe file."""
+        self._file.close()
 
     def _store(self, kf: LabelledKeyframe) -> None:
         depth_mm = np.clip(np.nan_to_num(kf.depth_m) * 1000.0 + 0.5, 0, 65535).astype(np.uint16)
@@ -107,7 +112,19 @@ class KeyframeFusion:
             ok, data = cv2.imencode(Path(suffix).suffix, image, params)
             if not ok:
                 raise StageError(f"could not encode keyframe {kf.keyframe_id}'s {suffix}")
-            (self._folder / f"{kf.keyframe_id}_{suffix}").write_bytes(data.tobytes())
+            try:
+                written = os.pwrite(self._file.fileno(), data.tobytes(), self._end)
+            except OSError as err:
+                written, reason = 0, err.strerror
+            else:
+                reason = "a short write"
+            if written != data.nbytes:
+                raise StageError(
+                    f"could not keep keyframe {kf.keyframe_id} for the map's rebuild in"
+                    f" {tempfile.gettempdir()} ({reason}); free space there or set TMPDIR"
+                )
+            self._where[kf.keyframe_id, suffix] = (self._end, written)
+            self._end += written
 
     def _loaded(self, ids: list[int]) -> Iterator[LabelledKeyframe]:
         """Yield the stored keyframes in order, decoding the next ones on another thread."""
@@ -122,7 +139,8 @@ class KeyframeFusion:
 
     def _load(self, kf: int) -> LabelledKeyframe:
         def read(suffix: str, flags: int) -> npt.NDArray[np.generic]:
-            data = np.frombuffer((self._folder / f"{kf}_{suffix}").read_bytes(), np.uint8)
+            offset, size = self._where[kf, suffix]
+            data = np.frombuffer(os.pread(self._file.fileno(), size, offset), np.uint8)
             return np.asarray(cv2.imdecode(data, flags))
 
         bgr = read("color.jpg", cv2.IMREAD_COLOR)

@@ -30,6 +30,11 @@ class RefineConfig:
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
+    table_surfaces: bool = True  # a level plane at a desk's height is a table top (surfaces.py):
+    table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
+    table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
+    # points become table (on TUM fr1_rpy the networks call the desk wall and clutter)
+    table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift)
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
@@ -51,6 +56,8 @@ class RefineConfig:
     # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
+    regrow_structure: bool = False  # regrowth may turn points the network calls structure
+    # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
     seed: int = 0  # RANSAC sampling
 
     @classmethod
@@ -59,9 +66,9 @@ class RefineConfig:
 
         The literal K rule (first run of 3 equal counts), MinPts the mean count, K = 1..k_max
         uncapped, clusters kept by size alone, regrowth blind to the network's labels and
-        every inlier of a structural plane taken. What stays ours: DBSCAN on voxel cells,
-        planes told by orientation and position (and the network's structure labels), only
-        object classes regrowing, inside their object's box.
+        every inlier of a structural plane taken, no table surfaces. What stays ours: DBSCAN on
+        voxel cells, planes told by orientation and position (and the network's structure
+        labels), only object classes regrowing, inside their object's box.
         """
         paper: dict[str, Any] = {
             "dbscan_rule": "literal",
@@ -71,6 +78,8 @@ class RefineConfig:
             "sparse_clusters_yield": False,
             "regrow_own_class_first": False,
             "plane_object_width_m": 0.0,
+            "table_surfaces": False,
+            "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})
 
@@ -95,6 +104,8 @@ class RefineConfig:
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
+            "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
+            "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),
@@ -126,6 +137,12 @@ class RefineConfig:
             raise ConfigError(
                 "refinement.plane_sample_points must be 0 (all points) or >= 3, "
                 f"got {self.plane_sample_points}"
+            )
+        low, high = self.table_heights_m if len(self.table_heights_m) == 2 else (1.0, 0.0)
+        if not 0.0 <= low <= high <= 10.0:
+            raise ConfigError(
+                "refinement.table_heights_m must be [low, high] metres above the floor with "
+                f"0 <= low <= high <= 10, got {list(self.table_heights_m)}"
             )
         if self.up is not None and (len(self.up) != 3 or sum(v * v for v in self.up) < 1e-12):
             raise ConfigError(f"refinement.up must be a non-zero 3-vector or absent, got {self.up}")

@@ -100,12 +100,15 @@ def refinement_metrics(
             "height_m": None if math.isnan(p.height_m) else p.height_m,
             "network_says": LABEL_NAMES[p.network_label] if p.network_label else "none",
             "kept_as_objects": p.kept_as_objects,
+            "table_points": p.table_points,
+            "note": p.note,
         }
         for p in result.planes.planes
     ]
     section["points"] = {
         "input": len(result.fused),
         "structural": int(result.planes.structural.sum()),
+        "table_surfaces": int(sum(p.table_points for p in result.planes.planes)),
         "sor_outliers": len(result.sor_outliers),
         "regrown": len(result.regrown),
         "final": int(result.kept.sum()),

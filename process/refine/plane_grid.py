@@ -7,6 +7,8 @@ import numpy.typing as npt
 
 from capture.recording import Label
 
+PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
+
 
 def plane_uv(
     points: npt.NDArray[np.float32], model: npt.NDArray[np.float64]
@@ -27,6 +29,25 @@ def grid_of(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]
         return np.zeros((0, 2), np.int64)
     ij: npt.NDArray[np.int64] = ((uv - uv.min(axis=0)) / cell_m).astype(np.int64)
     return ij
+
+
+def connected_pieces(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]:
+    """Return each point's connected piece (0..) on a grid of `cell_m` cells (8-connected).
+
+    The grid grows past `cell_m` where the points span over 2,000 cells: RANSAC's infinite
+    plane takes stray inliers metres away.
+    """
+    from scipy import ndimage
+
+    if len(uv) == 0:
+        return np.zeros(0, np.int64)
+    extent = float((uv.max(axis=0) - uv.min(axis=0)).max())
+    ij = grid_of(uv, max(cell_m, extent / 2000))
+    grid = np.zeros(tuple(ij.max(axis=0) + 1), bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    labelled, _ = ndimage.label(grid, structure=np.ones((3, 3), bool))
+    piece: npt.NDArray[np.int64] = labelled[ij[:, 0], ij[:, 1]].astype(np.int64) - 1
+    return piece
 
 
 def wide_object_regions(

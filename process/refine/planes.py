@@ -12,11 +12,16 @@ import numpy.typing as npt
 from capture.recording import Label
 from process.refine.config import RefineConfig
 from process.refine.gravity import gravity
-from process.refine.plane_grid import grid_of, plane_uv, wide_object_regions
+from process.refine.plane_grid import (
+    PIECE_CELL_M,
+    connected_pieces,
+    plane_uv,
+    wide_object_regions,
+)
+from process.refine.surfaces import table_surfaces
 
 logger = logging.getLogger(__name__)
 
-_PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
 _DENSITY_RADIUS_M = 0.05  # disc over which the cloud's surface density is counted
 _STRUCTURE_SHARE = 0.5  # a plane the network labels this much floor (ceiling, wall) is one
 
@@ -32,6 +37,8 @@ class Plane:
     height_m: float  # mean height of the removed (else all) inliers along `up`; nan if unknown
     network_label: int = 0  # the structure label the network gives most of it (0: none)
     kept_as_objects: int = 0  # inliers of a wide object-labelled region, left to the objects
+    table_points: int = 0  # inliers of a table surface (surfaces.py) that become table
+    note: str = ""  # why a level plane that is not structural is (not) a table surface
 
 
 @dataclass(frozen=True)
@@ -44,6 +51,13 @@ class PlaneSegmentation:
     up_source: str  # "argument", "argument snapped to plane", "largest plane" or "none"
     min_points: int = 0  # the Min used: a plane needs this many inliers
     density_per_m2: float = math.nan  # the cloud's surface density it was derived from
+    table: npt.NDArray[np.bool_] | None = None  # (N,) points of table surfaces, made table
+
+    def object_labels(self, labels: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+        """Return the network's labels with the table surfaces' points labelled table."""
+        if self.table is None or not self.table.any():
+            return labels
+        return np.where(self.table, np.uint8(Label.TABLE), labels).astype(np.uint8)
 
     @property
     def structural(self) -> npt.NDArray[np.bool_]:
@@ -86,11 +100,12 @@ def segment_planes(
     planes = tuple(
         _classify(points, m, idx, heights, up_used, cfg, min_points, labels) for m, idx in found
     )
-    labels = np.zeros(len(points), np.uint8)
+    planes, table = table_surfaces(points, planes, up_used, labels, cfg, density)
+    structure = np.zeros(len(points), np.uint8)
     for plane in planes:
-        labels[plane.removed] = plane.label
+        structure[plane.removed] = plane.label
     logger.debug("planes (Min %d): %s", min_points, [(p.label, len(p.indices)) for p in planes])
-    return PlaneSegmentation(planes, labels, up_used, source, min_points, density)
+    return PlaneSegmentation(planes, structure, up_used, source, min_points, density, table)
 
 
 def min_plane_points(
@@ -230,15 +245,7 @@ def _large_pieces(
     points: npt.NDArray[np.float32], model: npt.NDArray[np.float64], min_points: int
 ) -> npt.NDArray[np.bool_]:
     """Return the inliers in the largest connected piece, or in any piece of >= Min points."""
-    from scipy import ndimage
-
-    uv = plane_uv(points, model)
-    extent = float((uv.max(axis=0) - uv.min(axis=0)).max()) if len(uv) else 0.0
-    ij = grid_of(uv, max(_PIECE_CELL_M, extent / 2000))  # bounded grid for stray far inliers
-    grid = np.zeros(tuple(ij.max(axis=0) + 1), bool)
-    grid[ij[:, 0], ij[:, 1]] = True
-    pieces, _ = ndimage.label(grid, structure=np.ones((3, 3), bool))
-    piece = pieces[ij[:, 0], ij[:, 1]]
+    piece = connected_pieces(plane_uv(points, model), PIECE_CELL_M)
     sizes = np.bincount(piece)
     big = (sizes >= min_points) | (np.arange(len(sizes)) == sizes.argmax())
     kept: npt.NDArray[np.bool_] = big[piece]

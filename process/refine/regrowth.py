@@ -50,6 +50,7 @@ def regrow(
     gap_m: float = 0.0,
     up: npt.NDArray[np.float64] | None = None,
     prior: npt.NDArray[np.uint8] | None = None,
+    keep_out: npt.NDArray[np.bool_] | None = None,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -68,6 +69,9 @@ def regrow(
             then any. A correct point that DBSCAN set to 0 (noise at the edge of a thin
             part) goes back to its own object before a neighbour of another class reaches
             it; a wrong-class speck, whose class has no object near, is relabelled after.
+        keep_out: (N,) points that join no cluster though labelled 0 (the refinement passes
+            the network calls ceiling, floor or wall: on TUM fr1_rpy, a seated person otherwise
+            grows over the points around him that the network calls wall, his chair's among them).
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
@@ -85,7 +89,7 @@ def regrow(
     waves = 0
     for own in (None,) if prior is None else (prior, None):  # its own class first, then any
         frontier = np.flatnonzero(clusters > 0)
-        open_ = np.flatnonzero(labels == 0)
+        open_ = np.flatnonzero((labels == 0) if keep_out is None else (labels == 0) & ~keep_out)
         while len(frontier) and len(open_):
             joined, row = _wave(points, frontier, lookup[frontier], open_, table, own)
             if len(joined) == 0:

@@ -21,7 +21,8 @@ def log_steps(result: RefineResult, viz: Logger) -> None:
     viz.log_refine("planes", planes.points, labels=planes.labels)
     for plane in result.planes.planes:
         name = LABEL_NAMES[plane.label] if plane.label else "not structural"
-        viz.log_text(f"plane {name}: {len(plane.indices)} inliers, {len(plane.removed)} removed")
+        text = f"plane {name}: {len(plane.indices)} inliers, {len(plane.removed)} removed"
+        viz.log_text(f"{text}; {plane.note}" if plane.note else text)
     viz.set_stage(STAGE_SOR)
     outliers = result.outlier_cloud()
     viz.log_refine("outliers", outliers.points, labels=outliers.labels)

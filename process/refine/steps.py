@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from capture.recording import NUM_LABELS, OBJECT_LABELS
+from capture.recording import NUM_LABELS, OBJECT_LABELS, STRUCTURAL_LABELS
 from process.cloud import LabelledCloud
 from process.errors import StageError
 from process.refine.cells import attached_clusters, capped_cells, sparse_inside_others
@@ -113,13 +113,14 @@ def refine(
         seconds[step], tick = now - tick, now
 
     planes = segment_planes(cloud.points, cfg, up=up, labels=cloud.labels)
+    network = planes.object_labels(cloud.labels)  # phase I, table surfaces made table
     lap("planes")
     objects = np.flatnonzero(~planes.structural)
     keep = _sor(cloud.points[objects], cfg)
     outliers, objects = objects[~keep], objects[keep]
     lap("sor")
     points = cloud.points[objects]
-    labels, clusters, per_class, shared = _correct(points, cloud.labels[objects], cfg)
+    labels, clusters, per_class, shared = _correct(points, network[objects], cfg)
     lap("dbscan")
     labels_ii = np.where(planes.structural, planes.labels, 0).astype(np.uint8)
     clusters_ii = np.zeros(len(cloud), np.int32)
@@ -131,10 +132,13 @@ def refine(
         # only objects grow: structure is the plane step's, and a leftover wall or floor
         # piece of the network's would otherwise take the object points DBSCAN set to 0
         seeds = np.where(np.isin(labels, OBJECT_LABELS), clusters, 0).astype(np.int32)
-        prior = cloud.labels[objects] if cfg.regrow_own_class_first else None
+        prior = network[objects] if cfg.regrow_own_class_first else None
+        # a point the network calls ceiling, floor or wall is evidence against every object
+        said = None if cfg.regrow_structure else np.isin(network[objects], STRUCTURAL_LABELS)
         grown = regrow(
-            points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior
-        )
+            points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior,
+            keep_out=said,
+        )  # fmt: skip
         labels_iii[objects] = grown.labels
         clusters_iii[objects] = np.where(seeds > 0, grown.clusters, clusters)
         regrown, r2 = objects[grown.regrown], grown.r2_m

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from capture.recording import RecordingReader
@@ -42,7 +43,9 @@ def test_follow_processes_every_frame_as_written_and_ends_with_the_capture(
     sim_recording: Path, tmp_path: Path
 ) -> None:
     live, out = tmp_path / "live.mcap", tmp_path / "out"
-    follower = _follower(live, out, "--no-viz")
+    every_frame = tmp_path / "every_frame.toml"  # a loaded machine must not drop frames here
+    every_frame.write_text("[follow]\nmax_lag_s = 0\n")
+    follower = _follower(live, out, "--no-viz", "--config", str(every_frame))
     writer = _writer(sim_recording, live, speed=0.5)  # 30 frames over 2 s of camera time
     assert writer.wait(timeout=120) == 0
     assert follower.wait(timeout=120) == 0
@@ -90,3 +93,37 @@ def test_serve_streams_to_viewers_on_a_local_port_while_following(tmp_path: Path
     assert follower.stderr is not None
     assert "found no complete frame topics" in follower.stderr.read()
     assert not out.exists() or outputs.RRD not in [p.name for p in out.iterdir()]
+
+
+@pytest.mark.parametrize(("max_lag_s", "tracked", "dropped"), [(1.5, 15, 15), (0.0, 30, 0)])
+def test_following_drops_frames_read_too_late_never_two_in_a_row(
+    sim_recording: Path, tmp_path: Path, max_lag_s: float, tracked: int, dropped: int
+) -> None:
+    """A capture still being written whose frames were taken long ago: every frame is late."""
+    from capture.recording import RecordingWriter
+    from process.config import FollowConfig, ReplayConfig
+    from process.job import run_recording
+    from process.trajectory import read_tum
+
+    live = tmp_path / "unfinished.mcap"
+    with RecordingReader(sim_recording) as rec:
+        writer = RecordingWriter(live)
+        for frame in rec.frames():
+            if frame.index == 0 and frame.depth_to_color is not None:
+                writer.write_calibration(frame.depth_to_color, stamp_ns=frame.stamp_ns)
+            writer.write_frame(frame)
+        writer.flush()
+        writer.close_unfinished()  # no end-of-capture record: the capture goes on
+    cfg = ReplayConfig(follow=FollowConfig(max_lag_s=max_lag_s))
+    out = tmp_path / "out"
+    result = run_recording(
+        live, out, cfg=cfg, stages=("odometry",), no_viz=True, progress=False,
+        follow_idle_s=1.0,
+    )  # fmt: skip
+    assert result.metrics["odometry"]["frames"] == tracked
+    assert result.metrics["follow"]["frames_dropped"] == dropped
+    stamps = read_tum(out / outputs.TRAJECTORY).stamps_ns.tolist()
+    with RecordingReader(sim_recording) as rec:
+        every = [f.stamp_ns for f in rec.frames()]
+    kept = [every.index(s) for s in stamps] if dropped else list(range(30))
+    assert len(stamps) == tracked and np.all(np.diff(kept) <= 2)  # never two dropped in a row

@@ -51,3 +51,31 @@ def test_moved_keyframes_are_fused_again_at_their_final_poses() -> None:
     np.testing.assert_allclose(after.points.mean(axis=0) - before, [1.0, 0.0, 0.0], atol=0.02)
     assert np.all(after.labels == Label.WALL)  # labels survive the round trip through the files
     assert np.abs(after.colors.astype(int) - 200).max() <= 2  # JPEG keeps the colour
+
+
+def test_a_rebuild_gives_each_keyframe_back_its_own_depth_and_labels() -> None:
+    """Keyframes of different depth and label, kept in one file, come back each to its own."""
+    kinds = [(1.01, Label.WALL), (1.61, Label.CHAIR), (2.21, Label.TABLE)]
+    fusion = KeyframeFusion(FusionConfig(min_views=1))
+    for kf, (depth, label) in enumerate(kinds):
+        wall = _wall(kf)
+        fusion.add(
+            LabelledKeyframe(
+                kf,
+                wall.color,
+                np.full_like(wall.depth_m, depth),
+                np.full_like(wall.labels, label),
+                wall.confidence,
+                K,
+            ),
+            world_from_camera=_pose(0.0),
+        )
+    moved = {kf: _pose(3.0 * kf) for kf in range(3)}  # 3 m apart: the maps do not overlap
+    cloud = fusion.cloud(moved)
+    fusion.close()
+    assert fusion.refused
+    for kf, (depth, label) in enumerate(kinds):
+        near = np.abs(cloud.points[:, 0] - 3.0 * kf) < 1.4
+        assert near.sum() > 100
+        assert np.all(cloud.labels[near] == label)
+        assert abs(float(np.median(cloud.points[near, 2])) - depth) < 0.02

@@ -128,3 +128,17 @@ def test_a_table_box_reaches_the_floor_a_monitor_box_does_not() -> None:
     stand_labels = grown.labels[n:]
     assert (stand_labels[column > 0.76] == 9).all()  # within r1 below the monitor
     assert (stand_labels[column < 0.7] == 0).all()  # not down to the floor
+
+
+def test_points_kept_out_stay_unlabelled_the_rest_of_the_hole_refills() -> None:
+    """A table top with a missed patch: the patch's half that the network called wall stays 0."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.6))
+    hole = np.linalg.norm(top - (0.6, 0.3, 0.0), axis=1) < 0.2
+    labels = np.where(hole, 0, 4).astype(np.uint8)
+    clusters = np.where(hole, 0, 1).astype(np.int32)
+    keep_out = hole & (top[:, 1] >= 0.3)
+    grown = regrow(top, labels, clusters, r1_m={4: 0.05}, keep_out=keep_out)
+    assert keep_out.sum() > 100
+    assert (grown.labels[keep_out] == 0).all()
+    assert (grown.labels[~keep_out] == 4).all()
+    assert len(grown.regrown) == int((hole & ~keep_out).sum())

@@ -119,3 +119,18 @@ def test_a_sparse_cluster_inside_another_class_object_gives_way_one_on_its_own_s
     sparse = np.array([2, 3])  # no point dense enough at the paper's MinPts
     drop = sparse_inside_others(points, labels, clusters.astype(np.int32), sparse)
     assert drop.tolist() == [2]
+
+
+def test_a_sparse_object_standing_on_a_table_stays_though_specks_stretch_the_table() -> None:
+    """A box on a table touches the table's box at its foot; three table specks on its top
+    would stretch the table's box over it: the box is taken between percentiles 1 and 99."""
+    table = grid_patch((0.0, 1.2), (0.0, 0.6), z=0.75)
+    box = np.concatenate(
+        [grid_patch((0.4, 0.6), (0.2, 0.4), z=z, step=0.03) for z in np.arange(0.76, 0.95, 0.03)]
+    )  # 0.2 x 0.2 x 0.2 m, clutter
+    specks = np.array([[0.45, 0.25, 0.96], [0.5, 0.3, 0.96], [0.55, 0.35, 0.96]])  # "table"
+    points = np.concatenate([table, specks, box]).astype(np.float32)
+    n_table = len(table) + len(specks)
+    labels = np.r_[np.full(n_table, 4), np.full(len(box), 10)].astype(np.uint8)
+    clusters = np.r_[np.full(n_table, 1), np.full(len(box), 2)].astype(np.int32)
+    assert sparse_inside_others(points, labels, clusters, np.array([2])).tolist() == []

@@ -1,0 +1,117 @@
+"""Table surfaces: a large level plane at a desk's height above the floor is a table top.
+
+Real-image networks call much of a white desk "wall" or clutter: on TUM `fr1_rpy` the desk is
+a level plane 0.74 m above the floor whose points the network labels wall, clutter and table
+by turns, and the plane step left it to the objects as it is neither floor nor ceiling. Here
+a plane that is level (within `table_tolerance_deg` of gravity) and not structural is
+cut into connected pieces (gaps over ~10 cm separate); a piece whose median height above the
+floor plane lies in `table_heights_m` and whose surface, at the cloud's density, reaches
+`table_min_area_m2` is a table surface. Its points labelled structure, clutter or nothing
+become table; those the network gives another object class (a monitor's foot, a chair's arm,
+a person's hand) keep it. A chair seat (0.45 m) lies below the range, a shelf board (1.6 m)
+above it, and a tray or a book is too small.
+
+A desk stands against a wall, and the infinite plane crosses the wall in a band a few
+centimetres high: the plane's points within `plane_distance_m` of a wall plane are left out
+first, so the band stays wall.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Label
+from process.refine.config import RefineConfig
+from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, plane_uv
+
+if TYPE_CHECKING:
+    from process.refine.planes import Plane
+
+TO_TABLE = (Label.UNLABELLED, Label.CEILING, Label.FLOOR, Label.WALL, Label.CLUTTER)
+
+
+def table_surfaces(
+    points: npt.NDArray[np.float32],
+    planes: tuple[Plane, ...],
+    up: npt.NDArray[np.float64] | None,
+    labels: npt.NDArray[np.uint8] | None,
+    cfg: RefineConfig,
+    density_per_m2: float,
+) -> tuple[tuple[Plane, ...], npt.NDArray[np.bool_]]:
+    """Return the planes (table surfaces noted, with why) and the mask of points made table.
+
+    `up` is gravity-up (None: unknown, no surface); `labels` the network's labels (None: the
+    mask marks every point of the surfaces).
+    """
+    to_table = np.zeros(len(points), bool)
+    if not cfg.table_surfaces or up is None or not planes:
+        return planes, to_table
+    heights = points @ up.astype(np.float32)
+    floors = [p for p in planes if p.label == Label.FLOOR]
+    if not floors:
+        note = "no floor plane: a table surface is found by its height above the floor"
+        return tuple(p if p.label else replace(p, note=note) for p in planes), to_table
+    floor_m = max(floors, key=lambda p: len(p.removed)).height_m
+    walls = [p.model for p in planes if p.label == Label.WALL]
+    out = []
+    for plane in planes:
+        if plane.label:
+            out.append(plane)
+            continue
+        surface, note = _surface(points, plane, up, heights, floor_m, walls, cfg, density_per_m2)
+        if labels is not None:
+            surface = surface[np.isin(labels[surface], TO_TABLE)]
+        to_table[surface] = True
+        out.append(replace(plane, note=note, table_points=len(surface)))
+    return tuple(out), to_table
+
+
+def _surface(
+    points: npt.NDArray[np.float32],
+    plane: Plane,
+    up: npt.NDArray[np.float64],
+    heights: npt.NDArray[np.float32],
+    floor_m: float,
+    walls: list[npt.NDArray[np.float64]],
+    cfg: RefineConfig,
+    density: float,
+) -> tuple[npt.NDArray[np.intp], str]:
+    """Return the inliers of the plane's pieces that are table surfaces, and why (or why not)."""
+    none = np.zeros(0, np.intp)
+    tilt = math.degrees(math.acos(min(1.0, abs(float(plane.model[:3] @ up)))))
+    if tilt > cfg.table_tolerance_deg:
+        return none, f"not level ({tilt:.0f} deg from gravity)"
+    idx = plane.indices
+    for wall in walls:  # the band where the plane crosses a wall stays wall
+        idx = idx[
+            np.abs(points[idx] @ wall[:3].astype(np.float32) + wall[3]) > cfg.plane_distance_m
+        ]
+    if len(idx) == 0 or not density > 0:
+        return none, "no surface left off the walls"
+    pieces = connected_pieces(plane_uv(points[idx], plane.model), PIECE_CELL_M)
+    low, high = cfg.table_heights_m
+    kept, seen = [], []
+    for piece in range(int(pieces.max()) + 1):
+        members = idx[pieces == piece]
+        above = float(np.median(heights[members])) - floor_m
+        area = len(members) / density
+        seen.append((area, above))
+        if low <= above <= high and area >= cfg.table_min_area_m2:
+            kept.append(members)
+    if kept:
+        area = sum(len(m) for m in kept) / density
+        above = float(np.median(heights[np.concatenate(kept)])) - floor_m
+        return np.concatenate(kept), (
+            f"table surface: level, {above:.2f} m above the floor (range {low:g}-{high:g}),"
+            f" {area:.2f} m^2 in {len(kept)} piece(s) (>= {cfg.table_min_area_m2:g})"
+        )
+    area, above = max(seen)
+    return none, (
+        f"not a table surface: largest piece {area:.2f} m^2 at {above:.2f} m above the floor"
+        f" (needs {low:g}-{high:g} m and >= {cfg.table_min_area_m2:g} m^2)"
+    )

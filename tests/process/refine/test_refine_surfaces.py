@@ -1,0 +1,131 @@
+"""Table surfaces: a level plane at a desk's height becomes table, whatever the network said."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers_refine import RecordingLogger, grid_patch, labelled
+
+from capture.recording import Label
+from process.errors import ConfigError
+from process.refine import RefineConfig, refine
+from process.refine.job import refine_and_log, refinement_metrics
+from process.refine.planes import Plane, segment_planes
+from process.refine.surfaces import table_surfaces
+
+UP = np.array([0.0, 0.0, 1.0])
+CFG = RefineConfig(plane_min_points=150, max_planes=10)  # every plane here is found
+
+
+def _upright(x: tuple[float, float], z: tuple[float, float], y: float) -> np.ndarray:
+    """Return an upright grid in the plane y = `y`."""
+    wall = grid_patch(x, z)[:, [0, 2, 1]]
+    wall[:, 1] = y
+    return wall
+
+
+def _room() -> tuple[np.ndarray, np.ndarray, dict[str, slice]]:
+    """A room at 2 cm (2 mm noise): floor, a wall, and level boards labelled wall, clutter, floor.
+
+    desk: 1.2 x 0.8 m at 0.75 m against the wall, labelled wall with a clutter stripe and a
+    monitor's foot (tv monitor). shelf: 1.0 x 0.5 m at 1.6 m, labelled wall. tray: 0.3 x 0.3 m
+    at 0.75 m (coplanar with the desk, 1.3 m from it), clutter. bench: 1.0 x 0.6 m at 0.4 m,
+    labelled floor.
+    """
+    parts = {
+        "floor": (grid_patch((0.0, 4.0), (0.0, 3.0)), Label.FLOOR),
+        "wall": (_upright((0.0, 4.0), (0.04, 2.5), 3.0), Label.WALL),
+        "desk": (grid_patch((0.5, 1.7), (2.18, 2.98), z=0.75), Label.WALL),
+        "shelf": (grid_patch((2.5, 3.5), (2.48, 2.98), z=1.6), Label.WALL),
+        "tray": (grid_patch((3.0, 3.3), (1.0, 1.3), z=0.75), Label.CLUTTER),
+        "bench": (grid_patch((0.5, 1.5), (0.5, 1.1), z=0.4), Label.FLOOR),
+    }
+    jitter = np.random.default_rng(0).normal(
+        0.0, 0.002, (sum(len(p) for p, _ in parts.values()), 3)
+    )
+    points = (np.concatenate([p for p, _ in parts.values()]) + jitter).astype(np.float32)
+    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab in parts.values()])
+    bounds = np.cumsum([0] + [len(p) for p, _ in parts.values()])
+    where = {n: slice(a, b) for n, a, b in zip(parts, bounds[:-1], bounds[1:], strict=True)}
+    desk = points[where["desk"]]
+    labels[where["desk"]][desk[:, 0] < 0.7] = Label.CLUTTER  # a stripe the network calls clutter
+    foot = (np.abs(desk[:, 0] - 1.1) < 0.1) & (np.abs(desk[:, 1] - 2.8) < 0.1)
+    labels[where["desk"]][foot] = Label.TV_MONITOR
+    return points, labels, where
+
+
+def test_a_desk_top_labelled_wall_becomes_table_and_shelf_tray_and_bench_do_not() -> None:
+    points, labels, parts = _room()
+    seg = segment_planes(points, CFG, up=UP, labels=labels)
+    assert seg.table is not None
+    desk = labels[parts["desk"]]
+    assert (seg.table[parts["desk"]] == (desk != Label.TV_MONITOR)).all()  # the foot stays
+    for other in ("floor", "wall", "shelf", "tray", "bench"):
+        assert not seg.table[parts[other]].any(), other
+    assert (seg.labels[parts["floor"]] == Label.FLOOR).all()
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()
+    network = seg.object_labels(labels)
+    assert (network[parts["desk"]] == np.where(desk == Label.TV_MONITOR, desk, Label.TABLE)).all()
+    assert (network[parts["shelf"]] == Label.WALL).all()
+
+
+def test_metrics_say_which_plane_is_a_table_surface_and_why() -> None:
+    points, labels, parts = _room()
+    viz = RecordingLogger()
+    _, section = refine_and_log(labelled(points, labels), CFG, viz=viz, up=UP)
+    texts = [str(c[1]) for c in viz.calls if c[0] == "log_text"]
+    assert any("not structural" in t and "; table surface: level" in t for t in texts)
+    result = refine(labelled(points, labels), CFG, up=UP)
+    planes = refinement_metrics(result, gt_cloud=None)["planes"]
+    assert planes == section["planes"]
+    tables = [p for p in planes if p["table_points"] > 0]
+    assert len(tables) == 1  # the desk and the tray are one RANSAC plane, only the desk counts
+    assert tables[0]["note"].startswith("table surface: level, 0.75 m above the floor")
+    n_desk = parts["desk"].stop - parts["desk"].start
+    assert tables[0]["table_points"] == n_desk - (labels[parts["desk"]] == Label.TV_MONITOR).sum()
+    notes = " | ".join(p["note"] for p in planes)
+    assert "1.60 m above the floor" in notes  # the shelf: too high
+    assert "0.40 m above the floor" in notes  # the bench: too low
+    kept = result.kept[parts["desk"]]  # SOR takes the edges of a flat grid
+    final = result.labels_iii[parts["desk"]][kept]
+    assert kept.mean() > 0.9
+    assert (final == Label.TABLE).mean() > 0.95
+
+
+def test_the_band_where_the_plane_crosses_a_wall_stays_wall() -> None:
+    """The desk plane found before the wall takes a 4 cm band of it: the band is no table."""
+    desk = grid_patch((0.5, 1.7), (2.0, 2.98), z=0.75)
+    band = _upright((0.0, 4.0), (0.74, 0.76), 3.0)  # the wall's points on the desk's plane
+    floor = grid_patch((0.0, 4.0), (0.0, 3.0))
+    points = np.concatenate([desk, band, floor]).astype(np.float32)
+    n_desk, n_band = len(desk), len(band)
+    none = np.zeros(0, np.intp)
+    level = np.array([0.0, 0.0, 1.0, -0.75])
+    planes = (
+        Plane(level, np.arange(n_desk + n_band), 0, none, 0.75),
+        Plane(np.array([0.0, 1.0, 0.0, -3.0]), none, Label.WALL, none, 1.25),
+        Plane(np.array([0.0, 0.0, 1.0, 0.0]), np.arange(n_desk + n_band, len(points)),
+              Label.FLOOR, np.arange(n_desk + n_band, len(points)), 0.0),
+    )  # fmt: skip
+    out, table = table_surfaces(points, planes, UP, None, RefineConfig(), 2500.0)
+    assert table[:n_desk].all()
+    assert not table[n_desk:].any()
+    assert out[0].table_points == n_desk
+
+
+def test_without_a_floor_or_when_switched_off_nothing_becomes_table() -> None:
+    points, labels, parts = _room()
+    seg = segment_planes(points, RefineConfig(plane_min_points=150, table_surfaces=False), up=UP)
+    assert seg.table is not None and not seg.table.any()
+    no_floor = np.ones(len(points), bool)
+    no_floor[parts["floor"]] = False
+    seg = segment_planes(points[no_floor], CFG, up=UP, labels=labels[no_floor])
+    assert seg.table is not None and not seg.table.any()
+    assert any(p.note.startswith("no floor plane") for p in seg.planes)
+    assert not RefineConfig.paper().table_surfaces
+
+
+@pytest.mark.parametrize("heights", [(1.1, 0.5), (-0.2, 0.8), (0.5,)])
+def test_bad_table_heights_are_refused(heights: tuple[float, ...]) -> None:
+    with pytest.raises(ConfigError, match="table_heights_m"):
+        RefineConfig(table_heights_m=heights)  # type: ignore[arg-type]
