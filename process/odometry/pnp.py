@@ -140,10 +140,20 @@ def _reprojection_errors(
     camera_matrix: npt.NDArray[np.float64],
     dist: npt.NDArray[np.float64] | None,
 ) -> npt.NDArray[np.float64]:
-    proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
-    err = np.asarray(np.linalg.norm(np.asarray(proj).reshape(-1, 2) - img, axis=1), np.float64)
+    """Return each match's reprojection error in pixels, infinite behind the camera."""
     rot = np.asarray(cv2.Rodrigues(rvec)[0], np.float64)
-    behind = (obj @ rot.T + tvec.reshape(1, 3))[:, 2] <= 0
+    cam = obj @ rot.T + tvec.reshape(1, 3)
+    behind = cam[:, 2] <= 0
+    if dist is None:  # pinhole (undistorted images): numpy is cheaper than projectPoints
+        k = camera_matrix
+        z = np.where(behind, 1.0, cam[:, 2])
+        du = (k[0, 0] * cam[:, 0] + k[0, 1] * cam[:, 1]) / z + k[0, 2] - img[:, 0]
+        dv = k[1, 1] * cam[:, 1] / z + k[1, 2] - img[:, 1]
+        err = np.hypot(du, dv)
+    else:
+        proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
+        err = np.linalg.norm(np.asarray(proj).reshape(-1, 2) - img, axis=1)
+    err = np.asarray(err, np.float64)
     err[behind] = np.inf
     return err
 
