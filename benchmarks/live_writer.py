@@ -20,6 +20,9 @@ from capture.recording import RecordingReader, RecordingWriter
 def write_live(src: Path, dst: Path, *, speed: float = 1.0) -> int:
     """Copy SRC's frames into DST at `speed` times their recorded rate; return the frame count."""
     with RecordingReader(src) as rec, RecordingWriter(dst) as writer:
+        device = rec.metadata.get("device")
+        if device is not None:  # a capture says which camera it is before its first frame
+            writer.write_metadata("device", device)
         first_stamp: int | None = None
         t0 = time.monotonic()
         n = 0

@@ -83,14 +83,21 @@ class BatchConfig:
 class FollowConfig:
     """`process run --follow`: keeping up with a capture that is still being written."""
 
-    # A frame read more than this many seconds after the camera took it is dropped (not tracked,
-    # never two in a row), so that a job slower than the camera stays close behind it instead of
+    # A frame whose turn comes more than this many seconds after the camera took it is dropped
+    # (not tracked), so that a job slower than the camera stays close behind it instead of
     # falling further behind each second; 0 tracks every frame. Offline runs track every frame.
-    max_lag_s: float = 1.5
+    max_lag_s: float = 1.2
+    # ... but the frames tracked stay at most 1 / min_tracked_hz seconds apart in camera time
+    # (100 ms: a hand-held camera moves a few centimetres and degrees), so that tracking holds.
+    min_tracked_hz: float = 10.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.max_lag_s <= 3600.0:
             raise ConfigError(f"follow.max_lag_s must be in 0..3600 s, got {self.max_lag_s}")
+        if not 0.1 <= self.min_tracked_hz <= 1000.0:
+            raise ConfigError(
+                f"follow.min_tracked_hz must be in 0.1..1000 Hz, got {self.min_tracked_hz}"
+            )
 
 
 @dataclasses.dataclass(frozen=True, slots=True)

@@ -111,7 +111,7 @@ class ReplayPipeline:
         self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
         self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
         self._keyframes_skipped = 0  # following: keyframes the segmentation had no room for
-        self._frames_dropped = 0  # following: frames read too late to be tracked (FollowConfig)
+        self._frames_dropped = 0  # following: frames too late to be tracked (FollowConfig)
         self._read_waited_s = 0.0  # the frame loop waited for the next frame (or the camera)
         self._frames_done_at: float | None = None  # perf_counter when the last frame was tracked
 
@@ -120,6 +120,10 @@ class ReplayPipeline:
         wall0, cpu0 = time.perf_counter(), time.process_time()
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self._write_config()
+        if "segmentation" in self.stages:
+            # Import the networks' runtimes (torch: ~1 s) before the recording is opened: when
+            # following a capture this happens while waiting for its first frames, not after.
+            import process.segmentation.segmenter  # noqa: F401
         try:
             reader = RecordingReader(
                 self.recording, follow_idle_s=self.follow_idle_s, stop=self.stop
@@ -188,6 +192,7 @@ class ReplayPipeline:
         bar = tqdm(total=total, unit="frame", dynamic_ncols=True, disable=not self.progress)
         with bar:  # closed on errors too, so that an error line starts a line of its own
             for frame, depth_m in self._timed_frames(rec):
+                self._frames += 1
                 gt_pose = frame.ground_truth.world_from_camera if frame.ground_truth else None
                 if gt_pose is not None:
                     gt_stamps.append(frame.stamp_ns)
@@ -207,34 +212,37 @@ class ReplayPipeline:
         Reading, decoding (stage "read") and registering depth (stage "depth") run on that
         thread, so that the frame loop's thread does only the odometry.
         """
-        with contextlib.closing(prefetch(self._read(rec), name="read", stop=self.stop)) as items:
+        ahead = 2 if rec.following else 4  # following: frames wait less in the queue
+        frames = prefetch(self._read(rec), name="read", ahead=ahead, stop=self.stop)
+        with contextlib.closing(frames) as items:
             while True:
                 t0 = time.perf_counter()
                 item = next(items, None)
                 self._read_waited_s += time.perf_counter() - t0  # reading was the bottleneck
                 if item is None:
                     return
-                self._frames += 1
                 yield item
 
     def _read(self, rec: RecordingReader) -> Iterator[tuple[RgbdFrame, npt.NDArray[np.float32]]]:
         depth = DepthProcessor(self.cfg.depth)
         frames = rec.frames()
-        max_lag_ns = int(self.cfg.follow.max_lag_s * 1e9) if rec.following else 0
-        dropped = False
+        follow = self.cfg.follow
+        max_lag_ns = int(follow.max_lag_s * 1e9) if rec.following else 0
+        max_gap_ns = int(1e9 / follow.min_tracked_hz)
+        kept_ns: int | None = None  # stamp of the last frame passed on to be tracked
         while True:
             with self.clock("read"):
                 frame = next(frames, None)
             if frame is None:
                 return
-            # following a capture: a frame that is already too old is dropped, so that a job
-            # slower than the camera keeps up with it; never two in a row, so tracking holds
+            # following a capture: a frame already too old when it is read is dropped before
+            # any work on it, so that a job slower than the camera keeps up; but the frames
+            # tracked stay at most 1 / min_tracked_hz apart in camera time, so tracking holds
             late = max_lag_ns > 0 and time.time_ns() - frame.stamp_ns > max_lag_ns
-            if late and not dropped:
+            if late and kept_ns is not None and frame.stamp_ns - kept_ns < max_gap_ns:
                 self._frames_dropped += 1
-                dropped = True
                 continue
-            dropped = False
+            kept_ns = frame.stamp_ns
             with self.clock("depth"):
                 depth_m = depth.process(frame)
             yield frame, depth_m
