@@ -107,7 +107,9 @@ class ReplayPipeline:
         self._seg_stats = _SegStats()
         self._seg_model: dict[str, Any] = {}  # which model, why, its load time
         self._fusion = KeyframeFusion(cfg.fusion) if "fusion" in stages else None
-        self._keyframes: Worker[_Keyframe] = Worker("keyframes", self._on_keyframe)
+        # 12 keyframes (~4 MB each) absorb a burst of keyframes in fast motion without holding
+        # the odometry back (4: the frame loop waited 1 s of 22 on TUM fr1_rpy, 12: 0.3 s)
+        self._keyframes: Worker[_Keyframe] = Worker("keyframes", self._on_keyframe, max_pending=12)
         self._keyframe_stamps: dict[int, int] = {}  # keyframe id -> stamp_ns
         self._lag_s: list[float] = []  # following: wall clock minus frame stamp, per frame
         self._keyframes_skipped = 0  # following: keyframes the segmentation had no room for
