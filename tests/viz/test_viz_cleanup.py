@@ -29,7 +29,11 @@ def _viewer_child(view: psutil.Process, *, timeout_s: float = 60.0) -> psutil.Pr
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         for child in view.children(recursive=True):
-            if Path(child.cmdline()[0]).name == "rerun":
+            try:  # a child that is starting or ending has no command line yet or any more
+                cmdline = child.cmdline()
+            except (psutil.NoSuchProcess, psutil.ZombieProcess, psutil.AccessDenied):
+                continue
+            if len(cmdline) > 2 and Path(cmdline[0]).name == "rerun":
                 return child
         time.sleep(0.1)
     raise AssertionError("semreplay-view started no rerun child")
