@@ -31,6 +31,7 @@ import numpy.typing as npt
 from capture.recording import Intrinsics
 from process.cloud import LabelledCloud
 from process.errors import StageError
+from process.fusion.bleed import spilled_labels
 from process.fusion.votes import Fusion, FusionConfig
 
 _MOVED_ROTATION_RAD: Final = float(np.radians(0.25))
@@ -56,7 +57,9 @@ class KeyframeFusion:
 
     def __init__(self, cfg: FusionConfig) -> None:
         self.cfg = cfg
-        self.fusion = Fusion(replace(cfg, pixel_stride=1))  # keyframes arrive subsampled
+        # keyframes arrive subsampled, with their spilled labels' confidence already zeroed
+        self._fusion_cfg = replace(cfg, pixel_stride=1, spill_mad_factor=0.0)
+        self.fusion = Fusion(self._fusion_cfg)
         self.refused = False  # whether the map was rebuilt at the final poses
         self._fused_at: dict[int, npt.NDArray[np.float64]] = {}
         self._intrinsics: dict[int, Intrinsics] = {}
@@ -69,7 +72,7 @@ class KeyframeFusion:
         self, keyframe: LabelledKeyframe, *, world_from_camera: npt.NDArray[np.float64]
     ) -> None:
         """Fuse a keyframe at its current pose and keep it for a later rebuild."""
-        keyframe = subsample(keyframe, self.cfg.pixel_stride)
+        keyframe = _without_spill(subsample(keyframe, self.cfg.pixel_stride), self.cfg)
         self._integrate(keyframe, world_from_camera)
         self._fused_at[keyframe.keyframe_id] = world_from_camera.copy()
         self._intrinsics[keyframe.keyframe_id] = keyframe.intrinsics
@@ -80,7 +83,7 @@ class KeyframeFusion:
         if any(
             _moved(at, poses[kf], self.cfg.voxel_size_m / 2) for kf, at in self._fused_at.items()
         ):
-            self.fusion = Fusion(replace(self.cfg, pixel_stride=1))
+            self.fusion = Fusion(self._fusion_cfg)
             for keyframe in self._loaded(sorted(self._fused_at)):
                 self._integrate(keyframe, poses[keyframe.keyframe_id])
             self.refused = True
@@ -185,6 +188,22 @@ def subsample(kf: LabelledKeyframe, stride: int) -> LabelledKeyframe:
         np.ascontiguousarray(kf.confidence[cut]),
         intrinsics,
     )
+
+
+def _without_spill(kf: LabelledKeyframe, cfg: FusionConfig) -> LabelledKeyframe:
+    """Return the keyframe with no confidence where its labels spilled (`bleed.py`).
+
+    Fusion would zero those votes itself; doing it once here keeps a rebuild from finding the
+    spill of every keyframe again (an eighth of its time on TUM fr1_rpy).
+    """
+    if cfg.spill_mad_factor <= 0:
+        return kf
+    spilled = spilled_labels(
+        kf.labels, kf.depth_m, mad_factor=cfg.spill_mad_factor, min_margin_m=cfg.spill_min_margin_m
+    )
+    if not spilled.any():
+        return kf
+    return replace(kf, confidence=np.where(spilled, np.float32(0.0), kf.confidence))
 
 
 def _moved(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], tolerance_m: float) -> bool:

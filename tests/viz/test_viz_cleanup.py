@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -64,7 +65,10 @@ def test_a_stop_signal_ends_the_viewer_and_removes_the_temporary_folder(
         assert not blueprint.parent.exists()
         gone, alive = psutil.wait_procs([rerun], timeout=5)
         assert alive == [] and gone == [rerun]
-    finally:
+    finally:  # a failed test leaves no viewer behind: children first, or they are orphaned
         if view.poll() is None:
+            with contextlib.suppress(psutil.NoSuchProcess):
+                for child in psutil.Process(view.pid).children(recursive=True):
+                    child.kill()
             view.kill()
             view.wait()
