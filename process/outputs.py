@@ -224,7 +224,15 @@ def summary_table(metrics: Mapping[str, Any], *, title: str = "semreplay process
     for key, value in metrics.get("follow", {}).items():  # seconds behind the camera, drops
         table.add_row("following", key, _fmt(value))
     odo = metrics.get("odometry", {})
-    for key in ("frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"):
+    for key in (
+        "frames",
+        "keyframes",
+        "fps",
+        "ate_rmse_m",
+        "rpe_trans_m",
+        "rpe_rot_deg",
+        "rolling_shutter_readout_s",
+    ):
         if odo.get(key) is not None:
             table.add_row("odometry", key, _fmt(odo[key]))
     seg = metrics.get("segmentation", {})

@@ -376,6 +376,8 @@ class ReplayPipeline:
             "frames": self._frames,
             "keyframes": 0 if self._odometry is None else self._odometry.n_keyframes,
         }
+        if self._odometry is not None:  # the rolling-shutter model it ran with (0: global)
+            odo["rolling_shutter_readout_s"] = self._odometry.readout_s
         if len(ground_truth):
             self.viz.log_trajectory("ground_truth", ground_truth.stamps_ns, ground_truth.positions)
             odo["ate_rmse_m"] = ate_rmse(trajectory, ground_truth)

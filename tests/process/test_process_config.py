@@ -112,3 +112,15 @@ def test_viz_options_out_of_range_are_one_line_errors(
     with pytest.raises(ConfigError, match=match) as info:
         load_config(write(tmp_path, f"[viz]\n{text}\n"))
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [("max_lag_s = -1.0", "follow.max_lag_s"), ("min_tracked_hz = 0.0", "follow.min_tracked_hz")],
+)
+def test_follow_options_out_of_range_are_one_line_errors(
+    tmp_path: Path, text: str, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match) as info:
+        load_config(write(tmp_path, f"[follow]\n{text}\n"))
+    assert "\n" not in str(info.value)

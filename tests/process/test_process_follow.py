@@ -108,6 +108,7 @@ def test_following_drops_late_frames_but_tracks_at_min_tracked_hz(
     from capture.recording import RecordingWriter
     from process.config import FollowConfig, ReplayConfig
     from process.job import run_recording
+    from process.odometry.config import OdometryConfig
     from process.trajectory import read_tum
 
     live = tmp_path / "unfinished.mcap"
@@ -120,7 +121,11 @@ def test_following_drops_late_frames_but_tracks_at_min_tracked_hz(
         writer.flush()
         writer.close_unfinished()  # no end-of-capture record: the capture goes on
         stamps = [f.stamp_ns for f in rec.frames()]
-    cfg = ReplayConfig(follow=FollowConfig(max_lag_s=max_lag_s, min_tracked_hz=min_tracked_hz))
+    readout = 0.01 * every  # a config value wins over the recording's (a simulator: none)
+    cfg = ReplayConfig(
+        odometry=OdometryConfig(rolling_shutter_readout_s=readout),
+        follow=FollowConfig(max_lag_s=max_lag_s, min_tracked_hz=min_tracked_hz),
+    )
     out = tmp_path / "out"
     result = run_recording(
         live, out, cfg=cfg, stages=("odometry",), no_viz=True, progress=False,
@@ -130,3 +135,4 @@ def test_following_drops_late_frames_but_tracks_at_min_tracked_hz(
     assert result.metrics["odometry"]["frames"] == len(kept)
     assert result.metrics["follow"]["frames_dropped"] == len(stamps) - len(kept)
     assert read_tum(out / outputs.TRAJECTORY).stamps_ns.tolist() == kept
+    assert result.metrics["odometry"]["rolling_shutter_readout_s"] == readout

@@ -75,7 +75,7 @@ def test_the_corrected_solver_recovers_the_pose_the_global_shutter_one_misses() 
     kf, descriptors = _scene(np.random.default_rng(3))
     truth = _pose((0.01, 0.08, -0.02), (0.04, -0.01, 0.02))  # camera_from_keyframe, middle row
     xy = _exact_rolling_shutter(kf.points.astype(np.float64), truth)
-    prior = _pose((0.012, 0.075, -0.02), (0.035, -0.01, 0.02)) @ np.eye(4)  # ~0.3 deg off
+    prior = _pose((0.012, 0.075, -0.02), (0.035, -0.01, 0.02))  # ~0.3 deg off
     extractor = FeatureExtractor(
         K,
         n_features=1000,
