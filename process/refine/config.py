@@ -29,12 +29,17 @@ class RefineConfig:
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
+    wall_object_depth_m: float = 0.2  # a wall plane's points this far in front of a parallel
+    # wall behind it hang on that wall (a television): they go back to the objects (walls.py)
+    structure_band_sigmas: float = 3.0  # a structural plane keeps its points this many robust
+    # std of their distances deep (at most plane_distance_m); 0: all inliers (walls.py)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
     table_surfaces: bool = True  # a level plane at a desk's height is a table top (surfaces.py):
     table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
     table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
     # points become table (on TUM fr1_rpy the networks call the desk wall and clutter)
     table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift)
+    table_foot_m: float = 0.05  # its points this close to an object standing on it stay out
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
@@ -55,6 +60,8 @@ class RefineConfig:
     sparse_clusters_yield: bool = True  # a cluster sparse at the paper's MinPts goes to 0
     # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
+    nested_objects_yield: bool = True  # an object inside another class's box regrows only
+    # the points the network gave its class (regrowth.py: a wrong-class patch stays small)
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -66,9 +73,10 @@ class RefineConfig:
 
         The literal K rule (first run of 3 equal counts), MinPts the mean count, K = 1..k_max
         uncapped, clusters kept by size alone, regrowth blind to the network's labels and
-        every inlier of a structural plane taken, no table surfaces. What stays ours: DBSCAN on
-        voxel cells, planes told by orientation and position (and the network's structure
-        labels), only object classes regrowing, inside their object's box.
+        to objects nested in others, every inlier of a structural plane taken (objects on
+        walls too), no table surfaces. What stays ours: DBSCAN on voxel cells, planes told
+        by orientation and position (and the network's structure labels), only object
+        classes regrowing, inside their object's box.
         """
         paper: dict[str, Any] = {
             "dbscan_rule": "literal",
@@ -77,7 +85,10 @@ class RefineConfig:
             "attach_small_clusters": False,
             "sparse_clusters_yield": False,
             "regrow_own_class_first": False,
+            "nested_objects_yield": False,
             "plane_object_width_m": 0.0,
+            "wall_object_depth_m": 0.0,
+            "structure_band_sigmas": 0.0,
             "table_surfaces": False,
             "regrow_structure": True,
         }
@@ -104,8 +115,11 @@ class RefineConfig:
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
+            "wall_object_depth_m": (self.wall_object_depth_m, 0.0, 10.0),
+            "structure_band_sigmas": (self.structure_band_sigmas, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
+            "table_foot_m": (self.table_foot_m, 0.0, 1.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),

@@ -101,6 +101,8 @@ def refinement_metrics(
             "network_says": LABEL_NAMES[p.network_label] if p.network_label else "none",
             "kept_as_objects": p.kept_as_objects,
             "table_points": p.table_points,
+            "in_front_of_wall": p.on_wall,
+            "beyond_band": p.off_band,
             "note": p.note,
         }
         for p in result.planes.planes

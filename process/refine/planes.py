@@ -19,6 +19,7 @@ from process.refine.plane_grid import (
     wide_object_regions,
 )
 from process.refine.surfaces import table_surfaces
+from process.refine.walls import objects_on_walls, tighten_bands
 
 logger = logging.getLogger(__name__)
 
@@ -38,6 +39,8 @@ class Plane:
     network_label: int = 0  # the structure label the network gives most of it (0: none)
     kept_as_objects: int = 0  # inliers of a wide object-labelled region, left to the objects
     table_points: int = 0  # inliers of a table surface (surfaces.py) that become table
+    on_wall: int = 0  # inliers in front of a parallel wall behind, given back (walls.py)
+    off_band: int = 0  # inliers beyond the plane's own noise band, given back (walls.py)
     note: str = ""  # why a level plane that is not structural is (not) a table surface
 
 
@@ -100,6 +103,7 @@ def segment_planes(
     planes = tuple(
         _classify(points, m, idx, heights, up_used, cfg, min_points, labels) for m, idx in found
     )
+    planes = tighten_bands(points, objects_on_walls(points, planes, cfg), cfg)
     planes, table = table_surfaces(points, planes, up_used, labels, cfg, density)
     structure = np.zeros(len(points), np.uint8)
     for plane in planes:

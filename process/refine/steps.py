@@ -137,10 +137,10 @@ def refine(
         said = None if cfg.regrow_structure else np.isin(network[objects], STRUCTURAL_LABELS)
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior,
-            keep_out=said,
+            keep_out=said, nest=cfg.nested_objects_yield,
         )  # fmt: skip
         labels_iii[objects] = grown.labels
-        clusters_iii[objects] = np.where(seeds > 0, grown.clusters, clusters)
+        clusters_iii[objects] = np.where(grown.clusters > 0, grown.clusters, clusters)
         regrown, r2 = objects[grown.regrown], grown.r2_m
     lap("regrowth")
     seconds["total"] = time.perf_counter() - start

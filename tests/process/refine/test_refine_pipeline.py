@@ -131,6 +131,8 @@ def test_a_class_too_small_for_a_cluster_is_relabelled_zero_and_reported() -> No
     assert result.dbscan[7].choice is None and result.dbscan[7].relabelled == len(speck) == 5
     assert (result.labels_ii[speck] == 0).all()
     assert (result.labels_iii[speck] == 5).all()  # regrown into the chair around them
+    chair_id = np.bincount(result.clusters_ii[result.clusters_ii > 0]).argmax()
+    assert (result.clusters_iii[speck] == chair_id).all()  # and into its cluster
 
 
 def test_refine_and_log_logs_every_step_in_stage_order(office: SyntheticScene) -> None:

@@ -139,3 +139,46 @@ def test_a_screen_high_on_a_stand_is_upright_and_high_but_no_wall() -> None:
     assert any(len(p.indices) >= len(screen) for p in seg.planes)  # found as a plane
     assert (seg.labels[len(points) :] == 0).all()
     assert (seg.labels[parts["wall"]] == Label.WALL).all()
+
+
+def test_a_television_hung_on_a_wall_is_given_back_to_the_objects() -> None:
+    """A 1.4 x 0.8 m screen 7 cm in front of the wall: a wall plane takes it, then gives it back."""
+    points, parts = _room()
+    screen = grid_patch((0.3, 1.7), (1.7, 2.5), step=0.01)[:, [0, 2, 1]]  # 11,200 points
+    screen[:, 1] = 2.1 - 0.07  # in front of the wall at y = 2.1, 1.2-2.0 m above the floor
+    cloud = np.concatenate([points, screen])
+    seg = segment_planes(cloud, CFG, up=UP)
+    # RANSAC's best plane here tilts through the screen and a band of the wall: a wall plane
+    given = [p for p in seg.planes if p.on_wall]
+    assert len(given) == 1 and given[0].label == Label.WALL
+    assert given[0].on_wall > 0.9 * len(screen)
+    assert "in front of the parallel wall" in given[0].note
+    assert (seg.labels[len(points) :] == 0).all()
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()
+    off = segment_planes(cloud, RefineConfig(**{**CFG.__dict__, "wall_object_depth_m": 0.0}), up=UP)
+    assert (off.labels[len(points) :] == Label.WALL).mean() > 0.9  # off: the screen is wall
+
+
+def test_a_plane_keeps_its_own_noise_band_and_gives_back_the_feet_on_it() -> None:
+    """A floor with 3 mm noise, and the lowest 2 cm of a box standing on it."""
+    rng = np.random.default_rng(3)
+    points, parts = _room()
+    points = points + rng.normal(0.0, 0.003, points.shape).astype(np.float32)
+    foot = grid_patch((1.0, 1.4), (0.505, 0.525), step=0.005)[:, [0, 2, 1]]  # 0.5-2.5 cm up
+    foot[:, 1] = 0.3
+    cloud = np.concatenate([points, foot])
+    seg = segment_planes(cloud, CFG, up=UP)
+    floor = next(p for p in seg.planes if p.label == Label.FLOOR)
+    assert floor.off_band >= (foot[:, 2] > 0.5 + 0.012).sum()  # beyond 3 sigma (9 mm) + median
+    assert "band" in floor.note
+    assert (seg.labels[len(points) :][foot[:, 2] > 0.5 + 0.012] == 0).all()
+    assert (seg.labels[parts["floor"]] == Label.FLOOR).mean() > 0.995
+    noisy = cloud + np.r_[  # 1.5 cm noise: the band is wider than D, the plane keeps 2 cm
+        rng.normal(0.0, 0.015, points.shape), np.zeros(foot.shape)
+    ].astype(np.float32)
+    seg = segment_planes(noisy, CFG, up=UP)
+    assert all(p.off_band == 0 for p in seg.planes)
+    off = segment_planes(
+        cloud, RefineConfig(**{**CFG.__dict__, "structure_band_sigmas": 0.0}), up=UP
+    )
+    assert all(p.off_band == 0 for p in off.planes)

@@ -142,3 +142,25 @@ def test_points_kept_out_stay_unlabelled_the_rest_of_the_hole_refills() -> None:
     assert (grown.labels[keep_out] == 0).all()
     assert (grown.labels[~keep_out] == 4).all()
     assert len(grown.regrown) == int((hole & ~keep_out).sum())
+
+
+def test_a_wrong_class_patch_inside_a_screen_takes_only_its_own_points() -> None:
+    """A 20 cm chair patch on a 1.2 x 0.8 m screen, among the screen's unlabelled points."""
+    screen = grid_patch((0.0, 1.2), (1.0, 1.8))[:, [0, 2, 1]]  # upright, y = 0
+    centre = np.linalg.norm(screen[:, [0, 2]] - (0.3, 1.4), axis=1)
+    patch = centre < 0.1
+    missed = (np.abs(screen[:, 0] - 0.3) < 0.3) & ~patch  # unlabelled around the patch
+    said_chair = centre < 0.13  # a 3 cm fringe the network called chair, DBSCAN dropped
+    labels = np.where(patch, 5, np.where(missed, 0, 9)).astype(np.uint8)
+    clusters = np.where(patch, 1, np.where(missed, 0, 2)).astype(np.int32)
+    prior = np.where(said_chair, 5, labels).astype(np.uint8)  # DBSCAN dropped a chair fringe
+    up = np.array([0.0, 0.0, 1.0])
+    kw = {"r1_m": {5: 0.05, 9: 0.05}, "up": up, "prior": prior}
+    free = regrow(screen, labels, clusters, **kw)  # type: ignore[arg-type]
+    nested = regrow(screen, labels, clusters, nest=True, **kw)  # type: ignore[arg-type]
+    fringe = said_chair & ~patch
+    assert fringe.sum() > 10
+    assert ((free.labels == 5) & missed & ~said_chair).sum() > 100  # grows over the screen
+    assert (nested.labels[fringe] == 5).all()  # its own points come back to it
+    assert (nested.labels[missed & ~said_chair] == 9).all()  # the rest is the screen's
+    assert (nested.clusters[missed & ~said_chair] == 2).all()
