@@ -8,11 +8,7 @@ cut into connected pieces (gaps over ~10 cm separate); a piece whose median heig
 floor plane lies in `table_heights_m` and whose surface, at the cloud's density, reaches
 `table_min_area_m2` is a table surface. Its points labelled structure, clutter or nothing
 become table; those the network gives another object class (a monitor's foot, a chair's arm,
-a person's hand) keep it. So do the feet of objects standing on it: a surface point within
-`table_foot_m` of a point of another object class that rises off the plane (a monitor's
-stand, a box on the desk) is left to regrowth. A piece whose object-labelled points are
-mostly of one other class (the level top of a sofa's back, 0.8 m high) is that object's, not
-a table's. A chair seat (0.45 m) lies below the range, a shelf board (1.6 m)
+a person's hand) keep it. A chair seat (0.45 m) lies below the range, a shelf board (1.6 m)
 above it, and a tray or a book is too small.
 
 A desk stands against a wall, and the infinite plane crosses the wall in a band a few
@@ -67,54 +63,12 @@ def table_surfaces(
         if plane.label:
             out.append(plane)
             continue
-        surface, note = _surface(
-            points, plane, up, heights, floor_m, walls, cfg, density_per_m2, labels
-        )
+        surface, note = _surface(points, plane, up, heights, floor_m, walls, cfg, density_per_m2)
         if labels is not None:
             surface = surface[np.isin(labels[surface], TO_TABLE)]
-            surface = surface[~_feet(points, surface, plane, labels, up, cfg)]
         to_table[surface] = True
         out.append(replace(plane, note=note, table_points=len(surface)))
     return tuple(out), to_table
-
-
-def _feet(
-    points: npt.NDArray[np.float32],
-    surface: npt.NDArray[np.intp],
-    plane: Plane,
-    labels: npt.NDArray[np.uint8],
-    up: npt.NDArray[np.float64],
-    cfg: RefineConfig,
-) -> npt.NDArray[np.bool_]:
-    """Return which surface points lie within `table_foot_m` of an object standing on it."""
-    from scipy.spatial import cKDTree
-
-    feet = np.zeros(len(surface), bool)
-    if cfg.table_foot_m <= 0 or len(surface) == 0:
-        return feet
-    model = plane.model if float(plane.model[:3] @ up) >= 0 else -plane.model
-    above = points @ model[:3].astype(np.float32) + np.float32(model[3])
-    standing = np.flatnonzero(labels >= Label.CHAIR)  # any object class but table
-    standing = standing[(above[standing] > cfg.plane_distance_m) & (above[standing] < 0.5)]
-    if len(standing) == 0:
-        return feet
-    distance, _ = cKDTree(points[standing]).query(
-        points[surface], distance_upper_bound=cfg.table_foot_m, workers=-1
-    )
-    feet[:] = np.isfinite(distance)
-    return feet
-
-
-def _mostly_other(labels: npt.NDArray[np.uint8] | None, members: npt.NDArray[np.intp]) -> bool:
-    """Return whether one object class labels more of the piece than desk labels do.
-
-    Desk labels: table, clutter and structure (a desk is called wall and clutter by turns).
-    """
-    if labels is None:
-        return False
-    counts = np.bincount(labels[members], minlength=int(Label.CLUTTER) + 1)
-    desk = counts[Label.CEILING : Label.TABLE + 1].sum() + counts[Label.CLUTTER]
-    return bool(counts[Label.CHAIR : Label.CLUTTER].max() > desk)
 
 
 def _surface(
@@ -126,7 +80,6 @@ def _surface(
     walls: list[npt.NDArray[np.float64]],
     cfg: RefineConfig,
     density: float,
-    labels: npt.NDArray[np.uint8] | None,
 ) -> tuple[npt.NDArray[np.intp], str]:
     """Return the inliers of the plane's pieces that are table surfaces, and why (or why not)."""
     none = np.zeros(0, np.intp)
@@ -142,28 +95,23 @@ def _surface(
         return none, "no surface left off the walls"
     pieces = connected_pieces(plane_uv(points[idx], plane.model), PIECE_CELL_M)
     low, high = cfg.table_heights_m
-    kept, seen, others = [], [], 0
+    kept, seen = [], []
     for piece in range(int(pieces.max()) + 1):
         members = idx[pieces == piece]
         above = float(np.median(heights[members])) - floor_m
         area = len(members) / density
         seen.append((area, above))
         if low <= above <= high and area >= cfg.table_min_area_m2:
-            if _mostly_other(labels, members):
-                others += 1
-            else:
-                kept.append(members)
+            kept.append(members)
     if kept:
         area = sum(len(m) for m in kept) / density
         above = float(np.median(heights[np.concatenate(kept)])) - floor_m
         return np.concatenate(kept), (
             f"table surface: level, {above:.2f} m above the floor (range {low:g}-{high:g}),"
             f" {area:.2f} m^2 in {len(kept)} piece(s) (>= {cfg.table_min_area_m2:g})"
-            + (f"; {others} piece(s) labelled mostly another object left out" if others else "")
         )
     area, above = max(seen)
     return none, (
         f"not a table surface: largest piece {area:.2f} m^2 at {above:.2f} m above the floor"
         f" (needs {low:g}-{high:g} m and >= {cfg.table_min_area_m2:g} m^2)"
-        + (f"; {others} piece(s) labelled mostly another object left out" if others else "")
     )

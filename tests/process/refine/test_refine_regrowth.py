@@ -164,3 +164,21 @@ def test_a_wrong_class_patch_inside_a_screen_takes_only_its_own_points() -> None
     assert (nested.labels[fringe] == 5).all()  # its own points come back to it
     assert (nested.labels[missed & ~said_chair] == 9).all()  # the rest is the screen's
     assert (nested.clusters[missed & ~said_chair] == 2).all()
+
+
+def test_nothing_is_nested_in_a_table_a_book_on_it_regrows() -> None:
+    """A 30 x 20 cm book 2 cm thick on a table: inside the table's box, but an object."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.6), z=0.75)
+    top = top[~((np.abs(top[:, 0] - 0.6) < 0.2) & (np.abs(top[:, 1] - 0.3) < 0.15))]  # unseen
+    book = grid_patch((0.45, 0.75), (0.2, 0.4), z=0.77)
+    points = np.concatenate([top, book])
+    said = (np.abs(book[:, 0] - 0.6) > 0.1) | (book[:, 1] < 0.23)  # its ends and an edge
+    labels = np.r_[np.full(len(top), 4), np.where(said, 10, 0)].astype(np.uint8)
+    clusters = np.r_[np.full(len(top), 1), np.where(said, 2, 0)].astype(np.int32)
+    kw = {"r1_m": {4: 0.04, 10: 0.04}, "up": np.array([0.0, 0.0, 1.0]), "prior": labels}
+    grown = regrow(points, labels, clusters, nest=True, **kw)  # type: ignore[arg-type]
+    assert (grown.labels[len(top) :] == 10).all()
+    screen = np.where(labels == 4, 9, labels).astype(np.uint8)  # on a screen it would be nested
+    kw["r1_m"], kw["prior"] = {9: 0.04, 10: 0.04}, screen
+    on_screen = regrow(points, screen, clusters, nest=True, **kw)  # type: ignore[arg-type]
+    assert (on_screen.labels[len(top) :][~said] == 0).all()

@@ -130,33 +130,3 @@ def test_without_a_floor_or_when_switched_off_nothing_becomes_table() -> None:
 def test_bad_table_heights_are_refused(heights: tuple[float, ...]) -> None:
     with pytest.raises(ConfigError, match="table_heights_m"):
         RefineConfig(table_heights_m=heights)  # type: ignore[arg-type]
-
-
-def test_the_feet_of_objects_standing_on_a_desk_stay_theirs() -> None:
-    """A box on the desk: its lowest 2 cm lie on the desk plane but keep the label clutter."""
-    points, labels, parts = _room()
-    box = np.concatenate(  # two 0.3 m sides of a box 0.2 m tall at x = 1.3, y 2.4-2.7
-        [_upright((1.3, 1.6), (0.75, 0.95), y) for y in (2.4, 2.7)]
-    ).astype(np.float32)
-    cloud = np.concatenate([points, box])
-    network = np.concatenate([labels, np.full(len(box), Label.CLUTTER, np.uint8)])
-    seg = segment_planes(cloud, CFG, up=UP, labels=network)
-    assert seg.table is not None
-    base = np.flatnonzero(box[:, 2] < 0.75 + CFG.plane_distance_m) + len(points)
-    assert len(base) > 0 and not seg.table[base].any()  # the box's foot stays clutter
-    desk = np.flatnonzero(network[parts["desk"]] == Label.CLUTTER) + parts["desk"].start
-    assert seg.table[desk].all()  # the clutter stripe far from it is desk
-    off = segment_planes(cloud, RefineConfig(**{**CFG.__dict__, "table_foot_m": 0.0}), up=UP,
-                         labels=network)  # fmt: skip
-    assert off.table is not None and off.table[base].all()
-
-
-def test_a_level_piece_labelled_another_object_is_no_table_surface() -> None:
-    """The top of a sofa's back at desk height, labelled sofa where labelled, is the sofa's."""
-    points, labels, parts = _room()
-    desk = parts["desk"]
-    labels[desk] = np.where(np.arange(desk.stop - desk.start) % 3 == 0, Label.SOFA, 0)
-    seg = segment_planes(points, CFG, up=UP, labels=labels)
-    assert seg.table is not None and not seg.table[desk].any()
-    level = next(p for p in seg.planes if abs(p.height_m - 0.75) < 0.01)
-    assert "1 piece(s) labelled mostly another object left out" in level.note
