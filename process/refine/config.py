@@ -39,6 +39,8 @@ class RefineConfig:
     table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
     # points become table (on TUM fr1_rpy the networks call the desk wall and clutter)
     table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift)
+    table_other_cell_m: float = 0.2  # ... but cells this wide labelled more chair, person,
+    # plant or sofa than desk stay out of it (0: none; surfaces.py)
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
     sor_nb_neighbors: int = 20  # SOR: neighbours of the mean distance
     sor_std_ratio: float = 2.0  # SOR: outlier beyond mean + ratio * std of the mean distances
@@ -118,6 +120,7 @@ class RefineConfig:
             "structure_band_sigmas": (self.structure_band_sigmas, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
+            "table_other_cell_m": (self.table_other_cell_m, 0.0, 10.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
             "min_cluster_area_m2": (self.min_cluster_area_m2, 0.0, 100.0),

@@ -8,8 +8,11 @@ cut into connected pieces (gaps over ~10 cm separate); a piece whose median heig
 floor plane lies in `table_heights_m` and whose surface, at the cloud's density, reaches
 `table_min_area_m2` is a table surface. Its points labelled structure, clutter or nothing
 become table; those the network gives another object class (a monitor's foot, a chair's arm,
-a person's hand) keep it. A chair seat (0.45 m) lies below the range, a shelf board (1.6 m)
-above it, and a tray or a book is too small.
+a person's hand) keep it, and so do the points of `table_other_cell_m` cells labelled more
+chair, person, plant or sofa than desk (structure, table, clutter): the level top of a sofa's
+back beside a table joins the table's piece, and its unlabelled points are the sofa's to
+regrow (simulator's room 2 at 1.2 cm: 1,272 sofa points made table). A chair seat (0.45 m)
+lies below the range, a shelf board (1.6 m) above it, and a tray or a book is too small.
 
 A desk stands against a wall, and the infinite plane crosses the wall in a band a few
 centimetres high: the plane's points within `plane_distance_m` of a wall plane are left out
@@ -65,10 +68,35 @@ def table_surfaces(
             continue
         surface, note = _surface(points, plane, up, heights, floor_m, walls, cfg, density_per_m2)
         if labels is not None:
-            surface = surface[np.isin(labels[surface], TO_TABLE)]
+            other = _other_cells(points, surface, plane, labels, cfg.table_other_cell_m)
+            surface = surface[~other & np.isin(labels[surface], TO_TABLE)]
         to_table[surface] = True
         out.append(replace(plane, note=note, table_points=len(surface)))
     return tuple(out), to_table
+
+
+def _other_cells(
+    points: npt.NDArray[np.float32],
+    surface: npt.NDArray[np.intp],
+    plane: Plane,
+    labels: npt.NDArray[np.uint8],
+    cell_m: float,
+) -> npt.NDArray[np.bool_]:
+    """Return the surface points in cells labelled more chair, person, plant or sofa than desk.
+
+    Desk labels: structure, table and clutter. A monitor or a plant pot on a desk is labelled
+    its class where it stands, but the desk around it is the desk's: monitors do not count.
+    """
+    from process.refine.plane_grid import grid_of
+
+    if len(surface) == 0 or cell_m <= 0:
+        return np.zeros(len(surface), bool)
+    ij = grid_of(plane_uv(points[surface], plane.model), cell_m)
+    flat = np.ravel_multi_index((ij[:, 0], ij[:, 1]), tuple(ij.max(axis=0) + 1))
+    lab = labels[surface]
+    other = np.bincount(flat, (lab >= Label.CHAIR) & (lab <= Label.SOFA))
+    desk = np.bincount(flat, (lab > 0) & ((lab <= Label.TABLE) | (lab == Label.CLUTTER)))
+    return (other > desk)[flat]
 
 
 def _surface(

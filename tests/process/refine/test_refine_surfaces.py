@@ -130,3 +130,19 @@ def test_without_a_floor_or_when_switched_off_nothing_becomes_table() -> None:
 def test_bad_table_heights_are_refused(heights: tuple[float, ...]) -> None:
     with pytest.raises(ConfigError, match="table_heights_m"):
         RefineConfig(table_heights_m=heights)  # type: ignore[arg-type]
+
+
+def test_cells_labelled_more_sofa_than_desk_stay_out_of_the_table() -> None:
+    """A sofa's back top beside the desk, coplanar: sofa where labelled, else nothing."""
+    points, labels, parts = _room()
+    desk = np.arange(parts["desk"].start, parts["desk"].stop)
+    corner = desk[points[desk, 0] > 1.3]  # 0.4 x 0.8 m at the desk's end: 2 cells of 0.2 m
+    labels[corner] = np.where(np.arange(len(corner)) % 3 == 0, Label.SOFA, 0)
+    seg = segment_planes(points, CFG, up=UP, labels=labels)
+    assert seg.table is not None
+    assert not seg.table[corner].any()
+    rest = np.setdiff1d(desk, corner)
+    assert seg.table[rest[points[rest, 0] < 0.95]].all()  # cells away from it are desk
+    off = RefineConfig(**{**CFG.__dict__, "table_other_cell_m": 0.0})
+    seg = segment_planes(points, off, up=UP, labels=labels)
+    assert seg.table is not None and seg.table[corner[labels[corner] == 0]].all()
