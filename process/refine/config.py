@@ -33,6 +33,8 @@ class RefineConfig:
     # wall behind it hang on that wall (a television): they go back to the objects (walls.py)
     structure_band_sigmas: float = 3.0  # a structural plane keeps its points this many robust
     # std of their distances deep (at most plane_distance_m); 0: all inliers (walls.py)
+    floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
+    # (walls.py; 0: the network's floor labels stand wherever they are)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
     table_surfaces: bool = True  # a level plane at a desk's height is a table top (surfaces.py):
     table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
@@ -90,6 +92,7 @@ class RefineConfig:
             "plane_object_width_m": 0.0,
             "wall_object_depth_m": 0.0,
             "structure_band_sigmas": 0.0,
+            "floor_label_max_m": 0.0,
             "table_surfaces": False,
             "regrow_structure": True,
         }
@@ -118,6 +121,7 @@ class RefineConfig:
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "wall_object_depth_m": (self.wall_object_depth_m, 0.0, 10.0),
             "structure_band_sigmas": (self.structure_band_sigmas, 0.0, 100.0),
+            "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
             "table_other_cell_m": (self.table_other_cell_m, 0.0, 10.0),

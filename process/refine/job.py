@@ -107,10 +107,12 @@ def refinement_metrics(
         }
         for p in result.planes.planes
     ]
+    nf = result.planes.not_floor
     section["points"] = {
         "input": len(result.fused),
         "structural": int(result.planes.structural.sum()),
         "table_surfaces": int(sum(p.table_points for p in result.planes.planes)),
+        "floor_labels_above_floor": 0 if nf is None else int(nf.sum()),
         "sor_outliers": len(result.sor_outliers),
         "regrown": len(result.regrown),
         "final": int(result.kept.sum()),

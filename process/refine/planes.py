@@ -19,7 +19,7 @@ from process.refine.plane_grid import (
     wide_object_regions,
 )
 from process.refine.surfaces import table_surfaces
-from process.refine.walls import objects_on_walls, tighten_bands
+from process.refine.walls import floor_said_above, objects_on_walls, tighten_bands
 
 logger = logging.getLogger(__name__)
 
@@ -55,9 +55,12 @@ class PlaneSegmentation:
     min_points: int = 0  # the Min used: a plane needs this many inliers
     density_per_m2: float = math.nan  # the cloud's surface density it was derived from
     table: npt.NDArray[np.bool_] | None = None  # (N,) points of table surfaces, made table
+    not_floor: npt.NDArray[np.bool_] | None = None  # (N,) "floor" well above it (walls.py)
 
     def object_labels(self, labels: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
-        """Return the network's labels with the table surfaces' points labelled table."""
+        """Return the network's labels, table surfaces table, "floor" above the floor 0."""
+        if self.not_floor is not None and self.not_floor.any():
+            labels = np.where(self.not_floor, np.uint8(0), labels).astype(np.uint8)
         if self.table is None or not self.table.any():
             return labels
         return np.where(self.table, np.uint8(Label.TABLE), labels).astype(np.uint8)
@@ -109,7 +112,10 @@ def segment_planes(
     for plane in planes:
         structure[plane.removed] = plane.label
     logger.debug("planes (Min %d): %s", min_points, [(p.label, len(p.indices)) for p in planes])
-    return PlaneSegmentation(planes, structure, up_used, source, min_points, density, table)
+    not_floor = floor_said_above(heights, planes, labels, structure > 0, cfg)
+    return PlaneSegmentation(
+        planes, structure, up_used, source, min_points, density, table, not_floor
+    )
 
 
 def min_plane_points(

@@ -182,3 +182,22 @@ def test_a_plane_keeps_its_own_noise_band_and_gives_back_the_feet_on_it() -> Non
         cloud, RefineConfig(**{**CFG.__dict__, "structure_band_sigmas": 0.0}), up=UP
     )
     assert all(p.off_band == 0 for p in off.planes)
+
+
+def test_floor_labels_well_above_the_floor_count_as_unlabelled() -> None:
+    """A chair seat at 0.45 m and a mat 4 cm up, both called floor by the network."""
+    points, parts = _room()  # the floor at z = 0.5
+    seat = grid_patch((2.0, 2.4), (0.2, 0.6), z=0.95)
+    mat = grid_patch((0.2, 0.6), (1.2, 1.6), z=0.54)
+    cloud = np.concatenate([points, seat, mat])
+    labels = np.zeros(len(cloud), np.uint8)
+    labels[parts["floor"]] = Label.FLOOR
+    labels[len(points) :] = Label.FLOOR
+    seg = segment_planes(cloud, CFG, up=UP, labels=labels)
+    assert seg.not_floor is not None
+    on_seat = np.arange(len(points), len(points) + len(seat))
+    assert seg.not_floor[on_seat].all() and seg.not_floor.sum() == len(seat)
+    assert (seg.object_labels(labels)[on_seat] == 0).all()
+    assert (seg.object_labels(labels)[-len(mat) :] == Label.FLOOR).all()  # 4 cm: still floor
+    off = RefineConfig(**{**CFG.__dict__, "floor_label_max_m": 0.0})
+    assert segment_planes(cloud, off, up=UP, labels=labels).not_floor is None
