@@ -133,6 +133,10 @@ def _model_rows() -> list[Row]:
             metric = f"{name}: agreement with {seg_models.TEACHER} on TUM fr1_rpy held-out frames"
             rows.append(_row(metric, "", f.agreement, 0.85, "issue 11 goal (student)",
                              higher_is_better=True, goal=">= 0.85"))  # fmt: skip
+        if f.half_size_agreement is not None:
+            metric = f"{name}: agreement with itself on half-size held-out frames"
+            rows.append(_row(metric, "", f.half_size_agreement, 0.85, "issue 11 student goal",
+                             higher_is_better=True, goal="teacher's own stability"))  # fmt: skip
         if f.miou is not None:
             metric = f"{name}: mIoU, simulated seeds {seg_models.SIM_SEEDS}"
             rows.append(_row(metric, "", f.miou, 0.80, "issue 5 goal", higher_is_better=True,

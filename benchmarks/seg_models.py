@@ -49,6 +49,9 @@ class ModelFigures:
     agreement: float | None  # with the teacher on held-out real frames
     miou: float | None  # on the simulated rooms
     iou: dict[int, float]
+    # The model's agreement with itself when the frames are halved in size (then its labels
+    # scaled back): how stable its labels are, a ceiling for a student that sees less detail.
+    half_size_agreement: float | None = None
 
 
 def read_rgb(path: Path) -> npt.NDArray[np.uint8]:
@@ -122,13 +125,29 @@ def measure(
             if real
             else None
         )
+        half = _half_size_agreement(seg, real, labels) if name == TEACHER and real else None
         cm = np.zeros((NUM_LABELS, NUM_LABELS), np.int64)
         for color, gt in sim:
             cm += confusion_matrix(seg.segment(color).labels, gt)
         iou = confusion_iou(cm)
         ms = 1000 * statistics.median(times)
-        out.append(ModelFigures(name, ms, load_s, agreement, confusion_miou(cm), iou))
+        out.append(ModelFigures(name, ms, load_s, agreement, confusion_miou(cm), iou, half))
     return out
+
+
+def _half_size_agreement(
+    seg: Segmenter, images: list[npt.NDArray[np.uint8]], labels: list[npt.NDArray[np.uint8]]
+) -> float:
+    """Return the share of pixels a model labels the same on the frames and on half-size ones."""
+    same = []
+    for image, full in zip(images, labels, strict=True):
+        h, w = image.shape[:2]
+        small = np.asarray(
+            cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA), np.uint8
+        )
+        back = cv2.resize(seg.segment(small).labels, (w, h), interpolation=cv2.INTER_NEAREST)
+        same.append(np.mean(back == full))
+    return float(np.mean(same))
 
 
 def main(argv: list[str]) -> int:
@@ -136,9 +155,14 @@ def main(argv: list[str]) -> int:
     for f in measure(checkpoints=tuple(Path(a) for a in argv)):
         agree = "n/a" if f.agreement is None else f"{f.agreement:.3f}"
         per = ", ".join(f"{LABEL_NAMES[k]} {v:.2f}" for k, v in f.iou.items())
+        half = (
+            ""
+            if f.half_size_agreement is None
+            else (f", agreement with itself on half-size frames {f.half_size_agreement:.3f}")
+        )
         print(
             f"{f.name}: {f.ms:.0f} ms/keyframe (load {f.load_s:.2f} s), agreement with "
-            f"{TEACHER} {agree}, sim mIoU {f.miou:.3f} [{per}]"
+            f"{TEACHER} {agree}{half}, sim mIoU {f.miou:.3f} [{per}]"
         )
     return 0
 
