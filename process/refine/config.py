@@ -65,6 +65,8 @@ class RefineConfig:
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
     nested_objects_yield: bool = True  # an object inside another class's box regrows only
     # the points the network gave its class (regrowth.py: a wrong-class patch stays small)
+    nested_adopt_ratio: float = 3.0  # ... and takes its host's class where the host object
+    # has this many times its points (0: never)
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -117,6 +119,7 @@ class RefineConfig:
             "k_max": (self.k_max, 3, 1000),
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
+            "nested_adopt_ratio": (self.nested_adopt_ratio, 0.0, 10**6),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "wall_object_depth_m": (self.wall_object_depth_m, 0.0, 10.0),

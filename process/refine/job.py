@@ -115,6 +115,7 @@ def refinement_metrics(
         "floor_labels_above_floor": 0 if nf is None else int(nf.sum()),
         "sor_outliers": len(result.sor_outliers),
         "regrown": len(result.regrown),
+        "adopted_by_host": len(result.adopted),
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

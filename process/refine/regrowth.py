@@ -14,7 +14,7 @@ nearest qualifying frontier point.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -39,6 +39,8 @@ class Regrowth:
     r2_m: dict[int, float]  # cluster id -> r2 of its object
     objects: dict[int, int]  # cluster id -> object id (1..)
     waves: int
+    adopted: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # indices of the points of nested clusters that took their host's class
 
 
 def regrow(
@@ -52,6 +54,7 @@ def regrow(
     prior: npt.NDArray[np.uint8] | None = None,
     keep_out: npt.NDArray[np.bool_] | None = None,
     nest: bool = False,
+    adopt_ratio: float = 0.0,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -78,6 +81,9 @@ def regrow(
             points the network gave its class (`prior`), none of the unlabelled ones: in the
             simulator's room 3 a 0.3 m chair patch on a wall-mounted screen otherwise took
             3,000 of the screen's unlabelled points. Without `prior` it grows over nothing.
+        adopt_ratio: with `nest`, a nested cluster whose largest host object holds at least
+            this many times its points takes the host's class first, and grows as part of it
+            (a chair's back top called clutter, a table leg called chair); 0: never.
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
@@ -86,7 +92,12 @@ def regrow(
     if len(ids) == 0:
         return Regrowth(labels, clusters, np.zeros(0, np.intp), {}, {}, 0)
     table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m)
-    nested = _nested(table) if nest else np.zeros(len(ids), bool)
+    hosts = _hosts(table) if nest else np.zeros((len(ids), len(ids)), bool)
+    nested = np.asarray(hosts.any(axis=1), bool)
+    adopted = _adopt(table, hosts, clusters, ids, adopt_ratio) if nested.any() else []
+    for nested_row, host in adopted:
+        labels[clusters == ids[nested_row]] = table.label[nested_row] = table.label[host]
+        nested[nested_row] = False
     if up is not None and len(points):
         floor = float(np.percentile(points[:, 2], _FLOOR_PERCENTILE))
         stands = np.isin(table.label, STANDING)
@@ -109,7 +120,9 @@ def regrow(
     regrown = np.concatenate(grown) if grown else np.zeros(0, np.intp)
     r2 = {int(i): float(r) for i, r in zip(ids, table.r2, strict=True)}
     objects = {int(i): int(o) + 1 for i, o in zip(ids, table.object, strict=True)}
-    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves)
+    rows = [row for row, _ in adopted]
+    taken = np.flatnonzero(np.isin(clusters, ids[rows])) if rows else np.zeros(0, np.intp)
+    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves, taken)
 
 
 @dataclass(frozen=True)
@@ -179,8 +192,8 @@ def _objects(
     return objects
 
 
-def _nested(table: _Clusters) -> npt.NDArray[np.bool_]:
-    """Return which clusters lie inside the box of an object of another class.
+def _hosts(table: _Clusters) -> npt.NDArray[np.bool_]:
+    """Return [a, b]: cluster a lies inside the box of cluster b's object, of another class.
 
     The cluster's own box is tested against the other object's box grown by r1 (a patch on a
     screen takes a few wall points behind it along). The cluster's, not its object's: a
@@ -190,10 +203,31 @@ def _nested(table: _Clusters) -> npt.NDArray[np.bool_]:
     """
     low, high = table.own_low, table.own_high
     inside = np.all((table.low[None] <= low[:, None]) & (high[:, None] <= table.high[None]), axis=2)
-    inside &= table.label[:, None] != table.label[None]  # [a, b]: a's box inside b's
+    inside &= table.label[:, None] != table.label[None]
     inside &= table.label[None] != Label.TABLE  # a table carries and shelters real objects
-    nested: npt.NDArray[np.bool_] = inside.any(axis=1)
-    return nested
+    hosts: npt.NDArray[np.bool_] = inside
+    return hosts
+
+
+def _adopt(
+    table: _Clusters,
+    hosts: npt.NDArray[np.bool_],
+    clusters: npt.NDArray[np.int32],
+    ids: npt.NDArray[np.int32],
+    ratio: float,
+) -> list[tuple[int, int]]:
+    """Return (nested row, host row) for nested clusters whose host object outweighs them."""
+    if ratio <= 0:
+        return []
+    sizes = np.bincount(np.searchsorted(ids, clusters[clusters > 0]), minlength=len(ids))
+    per_object = np.bincount(table.object, weights=sizes)
+    out = []
+    for row in np.flatnonzero(hosts.any(axis=1)):
+        candidates = np.flatnonzero(hosts[row])
+        host = int(candidates[np.argmax(per_object[table.object[candidates]])])
+        if per_object[table.object[host]] >= ratio * sizes[row]:
+            out.append((int(row), host))
+    return out
 
 
 def _wave(

@@ -176,9 +176,23 @@ def test_nothing_is_nested_in_a_table_a_book_on_it_regrows() -> None:
     labels = np.r_[np.full(len(top), 4), np.where(said, 10, 0)].astype(np.uint8)
     clusters = np.r_[np.full(len(top), 1), np.where(said, 2, 0)].astype(np.int32)
     kw = {"r1_m": {4: 0.04, 10: 0.04}, "up": np.array([0.0, 0.0, 1.0]), "prior": labels}
-    grown = regrow(points, labels, clusters, nest=True, **kw)  # type: ignore[arg-type]
-    assert (grown.labels[len(top) :] == 10).all()
+    grown = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
+    assert (grown.labels[len(top) :] == 10).all() and len(grown.adopted) == 0
     screen = np.where(labels == 4, 9, labels).astype(np.uint8)  # on a screen it would be nested
     kw["r1_m"], kw["prior"] = {9: 0.04, 10: 0.04}, screen
     on_screen = regrow(points, screen, clusters, nest=True, **kw)  # type: ignore[arg-type]
     assert (on_screen.labels[len(top) :][~said] == 0).all()
+
+
+def test_a_nested_patch_takes_its_hosts_class_when_the_host_outweighs_it() -> None:
+    """A 20 cm chair patch on a 1.2 x 0.8 m screen: 3 x its points or more, it becomes screen."""
+    screen = grid_patch((0.0, 1.2), (1.0, 1.8))[:, [0, 2, 1]]
+    patch = np.linalg.norm(screen[:, [0, 2]] - (0.3, 1.4), axis=1) < 0.1
+    labels = np.where(patch, 5, 9).astype(np.uint8)
+    clusters = np.where(patch, 1, 2).astype(np.int32)
+    kw = {"r1_m": {5: 0.05, 9: 0.05}, "up": np.array([0.0, 0.0, 1.0]), "prior": labels}
+    ratio = (~patch).sum() / patch.sum()
+    taken = regrow(screen, labels, clusters, nest=True, adopt_ratio=ratio - 0.1, **kw)  # type: ignore[arg-type]
+    assert (taken.labels == 9).all() and taken.adopted.tolist() == np.flatnonzero(patch).tolist()
+    kept = regrow(screen, labels, clusters, nest=True, adopt_ratio=ratio + 0.1, **kw)  # type: ignore[arg-type]
+    assert (kept.labels[patch] == 5).all() and len(kept.adopted) == 0
