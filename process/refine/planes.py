@@ -152,9 +152,17 @@ def _ransac_plane(
         # hypotheses scored on a random subset find the same dominant plane; all points are
         # then tested against it, so inlier counts are exact
         sample = points[rng.choice(len(points), cfg.plane_sample_points, replace=False)]
-    o3d.utility.random.seed(int(rng.integers(2**31)))
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample.astype(np.float64)))
-    model, _ = cloud.segment_plane(cfg.plane_distance_m, 3, cfg.plane_iterations)
+    # Open3D scores RANSAC hypotheses on parallel threads, each with its own random stream,
+    # so with several threads the plane depends on the scheduling (the same cloud and seed gave
+    # different planes on a loaded machine); on one thread it follows the seed alone.
+    threads = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        o3d.utility.random.seed(int(rng.integers(2**31)))
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample.astype(np.float64)))
+        model, _ = cloud.segment_plane(cfg.plane_distance_m, 3, cfg.plane_iterations)
+    finally:
+        o3d.utility.set_max_threads(threads)
     model = np.asarray(model, np.float64)
     inliers = _inliers(points, model, cfg.plane_distance_m)
     if len(inliers) >= 3:
