@@ -67,6 +67,8 @@ class RefineConfig:
     # the points the network gave its class (regrowth.py: a wrong-class patch stays small)
     nested_adopt_ratio: float = 3.0  # ... and takes its host's class where the host object
     # has this many times its points (0: never)
+    table_top_m: float = 0.02  # regrowth: a table's box reaches this far above its top,
+    # not r1: clutter on it that DBSCAN set to 0 stays off the table (0: r1, the paper's)
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -96,6 +98,7 @@ class RefineConfig:
             "structure_band_sigmas": 0.0,
             "floor_label_max_m": 0.0,
             "table_surfaces": False,
+            "table_top_m": 0.0,
             "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})
@@ -120,6 +123,7 @@ class RefineConfig:
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
             "nested_adopt_ratio": (self.nested_adopt_ratio, 0.0, 10**6),
+            "table_top_m": (self.table_top_m, 0.0, 1.0),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "wall_object_depth_m": (self.wall_object_depth_m, 0.0, 10.0),

@@ -116,6 +116,7 @@ def refinement_metrics(
         "sor_outliers": len(result.sor_outliers),
         "regrown": len(result.regrown),
         "adopted_by_host": len(result.adopted),
+        "held_above_tables": result.above_tables,
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

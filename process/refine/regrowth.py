@@ -41,6 +41,7 @@ class Regrowth:
     waves: int
     adopted: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # indices of the points of nested clusters that took their host's class
+    above_tables: int = 0  # points left 0 in tables' boxes above table_top_m, below r1
 
 
 def regrow(
@@ -55,6 +56,7 @@ def regrow(
     keep_out: npt.NDArray[np.bool_] | None = None,
     nest: bool = False,
     adopt_ratio: float = 0.0,
+    table_top_m: float = 0.0,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -84,6 +86,9 @@ def regrow(
         adopt_ratio: with `nest`, a nested cluster whose largest host object holds at least
             this many times its points takes the host's class first, and grows as part of it
             (a chair's back top called clutter, a table leg called chair); 0: never.
+        table_top_m: with `up`, a table's box reaches only this far above its top, not r1:
+            what stands on a table is not table (on fused sim maps, clutter the network
+            labelled right that DBSCAN left as specks grew into the table); 0: r1.
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
@@ -98,10 +103,15 @@ def regrow(
     for nested_row, host in adopted:
         labels[clusters == ids[nested_row]] = table.label[nested_row] = table.label[host]
         nested[nested_row] = False
+    reach = table.high.copy()  # the boxes' tops at r1, before tables' are cut
     if up is not None and len(points):
         floor = float(np.percentile(points[:, 2], _FLOOR_PERCENTILE))
         stands = np.isin(table.label, STANDING)
         table.low[stands, 2] = np.minimum(table.low[stands, 2], floor)
+        if table_top_m > 0:
+            desk = table.label == Label.TABLE
+            top = table.high[desk, 2] - table.r1[desk]  # the object's top
+            table.high[desk, 2] = top + np.minimum(table_top_m, table.r1[desk])
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
     grown: list[npt.NDArray[np.intp]] = []
     waves = 0
@@ -122,7 +132,25 @@ def regrow(
     objects = {int(i): int(o) + 1 for i, o in zip(ids, table.object, strict=True)}
     rows = [row for row, _ in adopted]
     taken = np.flatnonzero(np.isin(clusters, ids[rows])) if rows else np.zeros(0, np.intp)
-    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves, taken)
+    above = 0 if table_top_m <= 0 or up is None else _above(points, labels, table, reach)
+    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves, taken, above)
+
+
+def _above(
+    points: npt.NDArray[np.float32],
+    labels: npt.NDArray[np.uint8],
+    table: _Clusters,
+    reach: npt.NDArray[np.float64],
+) -> int:
+    """Return how many points left 0 lie between a table box's cut top and its r1 top."""
+    rows = np.flatnonzero(reach[:, 2] > table.high[:, 2])
+    xyz = points[labels == 0].astype(np.float64)
+    held = np.zeros(len(xyz), bool)
+    for row in rows:
+        held |= np.all((xyz >= table.low[row]) & (xyz <= reach[row]), axis=1) & (
+            xyz[:, 2] > table.high[row, 2]
+        )
+    return int(held.sum())
 
 
 @dataclass(frozen=True)

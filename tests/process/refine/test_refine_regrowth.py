@@ -130,6 +130,27 @@ def test_a_table_box_reaches_the_floor_a_monitor_box_does_not() -> None:
     assert (stand_labels[column < 0.7] == 0).all()  # not down to the floor
 
 
+def test_a_table_box_reaches_table_top_m_above_its_top_not_r1() -> None:
+    """A box on a table that DBSCAN set to 0: within r1 above the top, it is not table."""
+    up = np.array([0.0, 0.0, 1.0])
+    top = grid_patch((0.0, 1.0), (0.0, 0.6), z=0.75)
+    hole = grid_patch((0.4, 0.6), (0.2, 0.4), z=0.75)  # a missed patch of the top
+    top = top[~np.isin(top.round(3), hole.round(3)).all(axis=1)]
+    box = np.concatenate([grid_patch((0.4, 0.6), (0.2, 0.4), z=z) for z in (0.77, 0.79, 0.81)])
+    points = np.concatenate([top, hole, box])
+    labels = np.r_[np.full(len(top), 4), np.zeros(len(hole) + len(box))].astype(np.uint8)
+    clusters = np.where(labels == 4, 1, 0).astype(np.int32)
+    layer = np.r_[np.zeros(len(top) + len(hole)), np.repeat([0.77, 0.79, 0.81], len(hole))]
+    grown = regrow(points, labels, clusters, r1_m={4: 0.1}, up=up, table_top_m=0.03)
+    assert (grown.labels[len(top) : len(top) + len(hole)] == 4).all()  # the hole refills
+    assert (grown.labels[layer == 0.77] == 4).all()  # 2 cm above the top: within 3 cm
+    assert (grown.labels[layer > 0.78] == 0).all()  # 4 and 6 cm above: not table
+    assert grown.above_tables == 2 * len(hole)
+    paper = regrow(points, labels, clusters, r1_m={4: 0.1}, up=up)
+    assert (paper.labels == 4).all()  # r1 (10 cm) above the top: the box became table
+    assert paper.above_tables == 0
+
+
 def test_points_kept_out_stay_unlabelled_the_rest_of_the_hole_refills() -> None:
     """A table top with a missed patch: the patch's half that the network called wall stays 0."""
     top = grid_patch((0.0, 1.2), (0.0, 0.6))
