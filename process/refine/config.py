@@ -69,6 +69,8 @@ class RefineConfig:
     # has this many times its points (0: never)
     table_top_m: float = 0.02  # regrowth: a table's box reaches this far above its top,
     # not r1: clutter on it that DBSCAN set to 0 stays off the table (0: r1, the paper's)
+    rejoin_own_class: bool = True  # after regrowth, a point still 0 inside an object of its
+    # phase-I class (not a table), and of no other class, joins it beyond r1 (regrowth.py)
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -99,6 +101,7 @@ class RefineConfig:
             "floor_label_max_m": 0.0,
             "table_surfaces": False,
             "table_top_m": 0.0,
+            "rejoin_own_class": False,
             "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})

@@ -117,6 +117,7 @@ def refinement_metrics(
         "regrown": len(result.regrown),
         "adopted_by_host": len(result.adopted),
         "held_above_tables": result.above_tables,
+        "rejoined_own_class": result.rejoined,
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

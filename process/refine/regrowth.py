@@ -42,6 +42,7 @@ class Regrowth:
     adopted: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # indices of the points of nested clusters that took their host's class
     above_tables: int = 0  # points left 0 in tables' boxes above table_top_m, below r1
+    rejoined: int = 0  # points that joined an object of their prior class beyond r1 (`rejoin`)
 
 
 def regrow(
@@ -57,6 +58,7 @@ def regrow(
     nest: bool = False,
     adopt_ratio: float = 0.0,
     table_top_m: float = 0.0,
+    rejoin: bool = False,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -89,6 +91,10 @@ def regrow(
         table_top_m: with `up`, a table's box reaches only this far above its top, not r1:
             what stands on a table is not table (on fused sim maps, clutter the network
             labelled right that DBSCAN left as specks grew into the table); 0: r1.
+        rejoin: with `prior`, after growth a point still 0 whose prior class has an object
+            (not a table) whose box holds it, and no object of another class's box, joins
+            that object however far from it (chair legs whose upper half the network
+            missed, more than r1 below the seat); a table's box shelters chairs under it.
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
@@ -127,13 +133,48 @@ def regrow(
             grown.append(joined)
             open_ = np.setdiff1d(open_, joined, assume_unique=True)
             frontier, waves = joined, waves + 1
+    rejoined = 0
+    if rejoin and prior is not None:  # what growth left: points inside their class's object
+        open_ = (labels == 0) if keep_out is None else (labels == 0) & ~keep_out
+        joined, row = _rejoin(points, np.flatnonzero(open_), prior, table, nested)
+        labels[joined], clusters[joined] = table.label[row], ids[row].astype(np.int32)
+        grown.append(joined)
+        rejoined = len(joined)
     regrown = np.concatenate(grown) if grown else np.zeros(0, np.intp)
     r2 = {int(i): float(r) for i, r in zip(ids, table.r2, strict=True)}
     objects = {int(i): int(o) + 1 for i, o in zip(ids, table.object, strict=True)}
     rows = [row for row, _ in adopted]
     taken = np.flatnonzero(np.isin(clusters, ids[rows])) if rows else np.zeros(0, np.intp)
     above = 0 if table_top_m <= 0 or up is None else _above(points, labels, table, reach)
-    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves, taken, above)
+    return Regrowth(labels, clusters, np.sort(regrown), r2, objects, waves, taken, above, rejoined)
+
+
+def _rejoin(
+    points: npt.NDArray[np.float32],
+    open_: npt.NDArray[np.intp],
+    prior: npt.NDArray[np.uint8],
+    table: _Clusters,
+    nested: npt.NDArray[np.bool_],
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Return the open points inside an object of their prior class only, and the row each joins.
+
+    Of nested boxes of one class the smallest wins; a point inside an object of another class
+    too (a table leg the network called chair beside a chair) is left alone.
+    """
+    xyz = points[open_].astype(np.float64)
+    row = np.full(len(open_), -1, np.intp)
+    contested = np.zeros(len(open_), bool)  # inside an object of another class too
+    volume = np.prod(table.high - table.low, axis=1)
+    for r in np.argsort(-volume):  # the smallest box containing a point last, so it wins
+        if nested[r]:
+            continue
+        inside = np.all((xyz >= table.low[r]) & (xyz <= table.high[r]), axis=1)
+        mine = prior[open_] == table.label[r]
+        if table.label[r] != Label.TABLE:  # a table's box shelters chairs under it
+            row[inside & mine] = r
+        contested |= inside & ~mine
+    hit = (row >= 0) & ~contested
+    return open_[hit], row[hit]
 
 
 def _above(

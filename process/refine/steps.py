@@ -57,6 +57,7 @@ class RefineResult:
     adopted: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of nested clusters that took their host object's class (regrowth.py)
     above_tables: int = 0  # points left 0 above table tops that r1 would have reached
+    rejoined: int = 0  # points that joined an object of their phase-I class beyond r1
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -129,7 +130,7 @@ def refine(
     clusters_ii = np.zeros(len(cloud), np.int32)
     labels_ii[objects], clusters_ii[objects] = labels, clusters
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
-    regrown, r2, adopted, above = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0
+    regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
         # only objects grow: structure is the plane step's, and a leftover wall or floor
@@ -141,18 +142,19 @@ def refine(
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior,
             keep_out=said, nest=cfg.nested_objects_yield, adopt_ratio=cfg.nested_adopt_ratio,
-            table_top_m=cfg.table_top_m,
+            table_top_m=cfg.table_top_m, rejoin=cfg.rejoin_own_class,
         )  # fmt: skip
         labels_iii[objects] = grown.labels
         clusters_iii[objects] = np.where(grown.clusters > 0, grown.clusters, clusters)
         regrown, r2, adopted = objects[grown.regrown], grown.r2_m, objects[grown.adopted]
-        above = grown.above_tables
+        above, rejoined = grown.above_tables, grown.rejoined
     lap("regrowth")
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
+        rejoined,
     )  # fmt: skip
 
 

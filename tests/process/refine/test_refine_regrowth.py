@@ -217,3 +217,32 @@ def test_a_nested_patch_takes_its_hosts_class_when_the_host_outweighs_it() -> No
     assert (taken.labels == 9).all() and taken.adopted.tolist() == np.flatnonzero(patch).tolist()
     kept = regrow(screen, labels, clusters, nest=True, adopt_ratio=ratio + 0.1, **kw)  # type: ignore[arg-type]
     assert (kept.labels[patch] == 5).all() and len(kept.adopted) == 0
+
+
+def test_own_class_points_beyond_r1_rejoin_their_object_unless_another_class_holds_them() -> None:
+    """Chair legs the network labelled, 30 cm below the seat (r1 5 cm), rejoin the chair; a
+    chair-labelled point inside the table's box too, or only in the table's, stays 0."""
+    up = np.array([0.0, 0.0, 1.0])
+    floor_marker = grid_patch((3.0, 3.2), (0.0, 0.2), z=0.0)
+    seat = grid_patch((0.0, 0.4), (0.0, 0.4), z=0.45)
+    table = grid_patch((0.3, 1.5), (0.0, 0.6), z=0.75)
+    column = np.arange(0.02, 0.16, 0.02)
+    legs = np.array([[0.02, y, z] for y in (0.02, 0.38) for z in column], np.float32)
+    contested = np.array([[0.36, 0.2, 0.1]], np.float32)  # under the seat and the table
+    under_table = np.array([[1.2, 0.3, 0.3]], np.float32)  # only in the table's box
+    points = np.concatenate([floor_marker, seat, table, legs, contested, under_table])
+    n_open = len(legs) + 2
+    labels = np.r_[
+        np.zeros(len(floor_marker)), np.full(len(seat), 5), np.full(len(table), 4),
+        np.zeros(n_open),
+    ].astype(np.uint8)  # fmt: skip
+    prior = np.r_[np.zeros(len(floor_marker)), np.full(len(seat), 5), np.full(len(table), 4)]
+    prior = np.r_[prior, np.full(n_open, 5)].astype(np.uint8)
+    clusters = np.where(labels == 5, 1, np.where(labels == 4, 2, 0)).astype(np.int32)
+    r1 = {4: 0.05, 5: 0.05}
+    grown = regrow(points, labels, clusters, r1_m=r1, up=up, prior=prior, rejoin=True)
+    assert (grown.labels[-n_open:-2] == 5).all() and grown.rejoined == len(legs)
+    assert (grown.clusters[-n_open:-2] == 1).all()
+    assert grown.labels[-2] == 0 and grown.labels[-1] == 0
+    paper = regrow(points, labels, clusters, r1_m=r1, up=up, prior=prior)
+    assert (paper.labels[-n_open:] == 0).all() and paper.rejoined == 0  # beyond r1: stays 0
