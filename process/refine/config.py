@@ -71,6 +71,8 @@ class RefineConfig:
     # not r1: clutter on it that DBSCAN set to 0 stays off the table (0: r1, the paper's)
     rejoin_own_class: bool = True  # after regrowth, a point still 0 inside an object of its
     # phase-I class (not a table), and of no other class, joins it beyond r1 (regrowth.py)
+    tabletop_objects: bool = True  # after regrowth, points still 0 of one object class that
+    # stand on a table's top, min_cluster_points of them, become an object (tabletop.py)
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -102,6 +104,7 @@ class RefineConfig:
             "table_surfaces": False,
             "table_top_m": 0.0,
             "rejoin_own_class": False,
+            "tabletop_objects": False,
             "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})

@@ -118,6 +118,7 @@ def refinement_metrics(
         "adopted_by_host": len(result.adopted),
         "held_above_tables": result.above_tables,
         "rejoined_own_class": result.rejoined,
+        "tabletop_objects": len(result.tabletop),
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

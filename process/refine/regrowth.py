@@ -98,7 +98,7 @@ def regrow(
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
-        points = (points.astype(np.float64) @ _frame(up).T).astype(np.float32)
+        points = (points.astype(np.float64) @ frame(up).T).astype(np.float32)
     ids = np.unique(clusters[clusters > 0])
     if len(ids) == 0:
         return Regrowth(labels, clusters, np.zeros(0, np.intp), {}, {}, 0)
@@ -234,7 +234,7 @@ def _cluster_table(
     return _Clusters(label, obj, grown_low, grown_high, r1, r2, low, high)
 
 
-def _frame(up: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def frame(up: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Return a rotation whose third row is the unit `up` (points @ R.T have z along up)."""
     z = np.asarray(up, np.float64) / np.linalg.norm(up)
     x = np.cross([0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0], z)

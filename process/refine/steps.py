@@ -19,6 +19,7 @@ from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_par
 from process.refine.outliers import sor_inliers
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
+from process.refine.tabletop import tabletop_objects
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +59,8 @@ class RefineResult:
     # input indices of nested clusters that took their host object's class (regrowth.py)
     above_tables: int = 0  # points left 0 above table tops that r1 would have reached
     rejoined: int = 0  # points that joined an object of their phase-I class beyond r1
+    tabletop: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of the small objects found standing on tables after regrowth (tabletop.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -131,6 +134,7 @@ def refine(
     labels_ii[objects], clusters_ii[objects] = labels, clusters
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
+    tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
         # only objects grow: structure is the plane step's, and a leftover wall or floor
@@ -144,8 +148,15 @@ def refine(
             keep_out=said, nest=cfg.nested_objects_yield, adopt_ratio=cfg.nested_adopt_ratio,
             table_top_m=cfg.table_top_m, rejoin=cfg.rejoin_own_class,
         )  # fmt: skip
-        labels_iii[objects] = grown.labels
-        clusters_iii[objects] = np.where(grown.clusters > 0, grown.clusters, clusters)
+        new_labels, new_clusters = grown.labels, grown.clusters
+        if cfg.tabletop_objects and planes.up is not None:
+            new_labels, new_clusters, found = tabletop_objects(
+                points, new_labels, new_clusters, network[objects], r1_m=r1, up=planes.up,
+                min_points=cfg.min_cluster_points, first_id=int(clusters.max(initial=0)) + 1,
+            )  # fmt: skip
+            tabletop = objects[found]
+        labels_iii[objects] = new_labels
+        clusters_iii[objects] = np.where(new_clusters > 0, new_clusters, clusters)
         regrown, r2, adopted = objects[grown.regrown], grown.r2_m, objects[grown.adopted]
         above, rejoined = grown.above_tables, grown.rejoined
     lap("regrowth")
@@ -154,7 +165,7 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined,
+        rejoined, tabletop,
     )  # fmt: skip
 
 

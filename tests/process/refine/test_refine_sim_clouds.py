@@ -96,6 +96,7 @@ def test_metrics_say_which_rule_chose_k_and_why(room: SimScene) -> None:
     assert section["points"]["adopted_by_host"] >= 0
     assert section["points"]["held_above_tables"] >= 0
     assert 0 <= section["points"]["rejoined_own_class"] <= section["points"]["regrown"]
+    assert section["points"]["tabletop_objects"] >= 0
     assert all(p["in_front_of_wall"] >= 0 and p["beyond_band"] >= 0 for p in section["planes"])
     regrown = [c for c in viz.calls if c[0] == "log_refine" and c[1] == "regrown"]
     assert len(regrown) == 1
