@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
-FLAGS = (
+FLAGS = (  # also the browser test's (tests/helpers_browser.py)
     "--headless",
     "--no-sandbox",
     "--use-angle=swiftshader",

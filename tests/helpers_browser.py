@@ -16,25 +16,15 @@ from typing import Any, Final
 
 import numpy as np
 
+from benchmarks import viewer_screenshot
 from capture.recording import Intrinsics, RgbdFrame
 from viz import layout
 from viz.rerun_log import RerunLogger
 
-CHROMIUM: Final = Path("/usr/bin/chromium")
-CHROMEDRIVER: Final = Path("/usr/bin/chromedriver")
+CHROMIUM: Final = viewer_screenshot.CHROMIUM
+CHROMEDRIVER: Final = viewer_screenshot.CHROMEDRIVER
 WINDOW: Final = (1280, 800)
-CHROMIUM_FLAGS: Final = (
-    "--headless",
-    "--no-sandbox",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-dev-shm-usage",
-    f"--window-size={WINDOW[0]},{WINDOW[1]}",
-)
+CHROMIUM_FLAGS: Final = (*viewer_screenshot.FLAGS, f"--window-size={WINDOW[0]},{WINDOW[1]}")
 # The colour image of the small recording: four flat quadrants, easy to find in a screenshot.
 QUADRANTS: Final = ((230, 30, 30), (30, 200, 40), (40, 60, 230), (240, 220, 30))
 
