@@ -100,13 +100,22 @@ def main(argv: list[str]) -> int:
         if not binary.is_file():
             print(f"{binary} not found: install Debian's chromium and chromium-driver")
             return 2
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        print("selenium is not installed: pip install -e '.[dev]'")
+        return 2
     if not args.rrd.is_file():
         print(f"expected a .rrd file, found nothing at {args.rrd}")
         return 2
-    took = shoot(
-        args.rrd, args.out, size=(args.width, args.height), wait_s=args.wait,
-        settle_s=args.settle, port=args.port,
-    )  # fmt: skip
+    try:
+        took = shoot(
+            args.rrd, args.out, size=(args.width, args.height), wait_s=args.wait,
+            settle_s=args.settle, port=args.port,
+        )  # fmt: skip
+    except RuntimeError as err:  # the viewer would not serve the file
+        print(f"no screenshot of {args.rrd}: {err}")
+        return 2
     print(f"{args.out}: the viewer settled after {took:.0f} s")
     return 0
 

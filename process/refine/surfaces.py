@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
-from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, plane_uv
+from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
 
 if TYPE_CHECKING:
     from process.refine.planes import Plane
@@ -87,8 +87,6 @@ def _other_cells(
     Desk labels: structure, table and clutter. A monitor or a plant pot on a desk is labelled
     its class where it stands, but the desk around it is the desk's: monitors do not count.
     """
-    from process.refine.plane_grid import grid_of
-
     if len(surface) == 0 or cell_m <= 0:
         return np.zeros(len(surface), bool)
     ij = grid_of(plane_uv(points[surface], plane.model), cell_m)

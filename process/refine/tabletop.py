@@ -53,11 +53,13 @@ def tabletop_objects(
     labels, clusters = labels.copy(), clusters.copy()
     xyz = points.astype(np.float64) @ frame(up).T
     tops = _table_boxes(xyz, labels, clusters)
+    if not tops:
+        return labels, clusters, np.zeros(0, np.intp)
     open_ = np.flatnonzero((labels == 0) & np.isin(prior, ON_TABLES))
     added: list[npt.NDArray[np.intp]] = []
     next_id = max(first_id, int(clusters.max(initial=0)) + 1)
     for label in (int(c) for c in np.unique(prior[open_])):
-        if not tops or label not in r1_m:
+        if label not in r1_m:
             continue
         members = open_[prior[open_] == label]
         tree = cKDTree(xyz[members])

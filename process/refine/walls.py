@@ -57,11 +57,11 @@ def objects_on_walls(
     for a in walls:
         front = np.zeros(len(planes[a].removed), bool)
         behind: list[int] = []
+        xyz = points[planes[a].removed].astype(np.float64)
         for b in walls:
             model = _facing(planes[b].model, centre)
             if a == b or abs(float(planes[a].model[:3] @ model[:3])) < parallel:
                 continue
-            xyz = points[planes[a].removed].astype(np.float64)
             offset = xyz @ model[:3] + model[3]  # > 0: in front of wall b, into the room
             if not 0 < float(np.median(offset)) <= cfg.wall_object_depth_m:
                 continue  # not in front of b, or too far in front to hang on it
