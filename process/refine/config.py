@@ -24,6 +24,8 @@ class RefineConfig:
     plane_min_share: float = 0.02  # ... or this share of the points, whichever is smaller
     plane_max_remaining: int = 1000  # Max: the search ends once fewer points remain
     plane_iterations: int = 300  # RANSAC iterations per plane (Table 5: 300)
+    plane_local_hypotheses: int = 300  # ... and this many planes of random points' neighbours
+    # compete with RANSAC's (plane_grid.local_plane: finds walls of a few % of the points); 0: off
     plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
     max_planes: int = 8  # planes tried at most, structural or not
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
@@ -31,6 +33,10 @@ class RefineConfig:
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
     wall_object_depth_m: float = 0.2  # a wall plane's points this far in front of a parallel
     # wall behind it hang on that wall (a television): they go back to the objects (walls.py)
+    furniture_depth_m: float = 1.2  # a wall plane up to this far in front of a larger parallel
+    furniture_top_gap_m: float = 0.3  # wall, ending this much lower, is a cabinet (walls.py)
+    wall_keep_out_m: float = 0.03  # points this far behind a wall plane (a door or window
+    # recess) join no object in regrowth; 0: regrowth may cross walls (walls.py)
     structure_band_sigmas: float = 3.0  # a structural plane keeps its points this many robust
     # std of their distances deep (at most plane_distance_m); 0: all inliers (walls.py)
     floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
@@ -99,6 +105,9 @@ class RefineConfig:
             "nested_objects_yield": False,
             "plane_object_width_m": 0.0,
             "wall_object_depth_m": 0.0,
+            "wall_keep_out_m": 0.0,
+            "furniture_depth_m": 0.0,
+            "plane_local_hypotheses": 0,
             "structure_band_sigmas": 0.0,
             "floor_label_max_m": 0.0,
             "table_surfaces": False,
@@ -117,6 +126,7 @@ class RefineConfig:
             "plane_min_share": (self.plane_min_share, 0.0, 1.0),
             "plane_max_remaining": (self.plane_max_remaining, 0, 10**9),
             "plane_iterations": (self.plane_iterations, 1, 100_000),
+            "plane_local_hypotheses": (self.plane_local_hypotheses, 0, 100_000),
             "plane_sample_points": (self.plane_sample_points, 0, 10**9),
             "max_planes": (self.max_planes, 0, 100),
             "horizontal_tolerance_deg": (self.horizontal_tolerance_deg, 0.0, 45.0),
@@ -133,6 +143,9 @@ class RefineConfig:
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "wall_object_depth_m": (self.wall_object_depth_m, 0.0, 10.0),
+            "wall_keep_out_m": (self.wall_keep_out_m, 0.0, 10.0),
+            "furniture_depth_m": (self.furniture_depth_m, 0.0, 10.0),
+            "furniture_top_gap_m": (self.furniture_top_gap_m, 0.0, 10.0),
             "structure_band_sigmas": (self.structure_band_sigmas, 0.0, 100.0),
             "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),

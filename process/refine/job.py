@@ -119,6 +119,7 @@ def refinement_metrics(
         "held_above_tables": result.above_tables,
         "rejoined_own_class": result.rejoined,
         "tabletop_objects": len(result.tabletop),
+        "behind_walls_left_out": result.behind_walls,
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

@@ -20,6 +20,7 @@ from process.refine.outliers import sor_inliers
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
 from process.refine.tabletop import tabletop_objects
+from process.refine.walls import behind_walls
 
 logger = logging.getLogger(__name__)
 
@@ -61,6 +62,7 @@ class RefineResult:
     rejoined: int = 0  # points that joined an object of their phase-I class beyond r1
     tabletop: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of the small objects found standing on tables after regrowth (tabletop.py)
+    behind_walls: int = 0  # unlabelled points behind a wall plane that regrowth left out
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -134,6 +136,7 @@ def refine(
     labels_ii[objects], clusters_ii[objects] = labels, clusters
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
+    n_behind = 0
     tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -143,6 +146,10 @@ def refine(
         prior = network[objects] if cfg.regrow_own_class_first else None
         # a point the network calls ceiling, floor or wall is evidence against every object
         said = None if cfg.regrow_structure else np.isin(network[objects], STRUCTURAL_LABELS)
+        behind = behind_walls(cloud.points, planes.planes, cfg)[objects]
+        if behind.any():
+            said = behind if said is None else said | behind
+        n_behind = int((behind & (labels == 0)).sum())
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior,
             keep_out=said, nest=cfg.nested_objects_yield, adopt_ratio=cfg.nested_adopt_ratio,
@@ -165,7 +172,7 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop,
+        rejoined, tabletop, n_behind,
     )  # fmt: skip
 
 
