@@ -46,7 +46,7 @@ import numpy.typing as npt
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
-from process.refine.plane_grid import plane_uv
+from process.refine.plane_grid import grid_of, plane_uv
 
 if TYPE_CHECKING:
     from process.refine.planes import Plane
@@ -77,8 +77,10 @@ def objects_on_walls(
             wall = plane_uv(points[planes[b].removed], model)
             uv = plane_uv(points[planes[a].removed], model)
             within = np.all((uv >= wall.min(axis=0)) & (uv <= wall.max(axis=0)), axis=1)
-            front |= (offset > cfg.plane_distance_m) & (offset <= cfg.wall_object_depth_m) & within
-            behind.append(b)
+            given = (offset > cfg.plane_distance_m) & (offset <= cfg.wall_object_depth_m) & within
+            if given.any() and _area_m2(uv[given]) < _area_m2(wall):
+                front |= given  # ... and smaller than it (TUM: a wall before a smaller plane)
+                behind.append(b)
         if front.any():
             note = (
                 f"{int(front.sum())} points stand {cfg.plane_distance_m:g}-"
@@ -130,6 +132,11 @@ def furniture_fronts(
                 out[a] = replace(planes[a], label=0, removed=planes[a].removed[:0], note=note)
                 break
     return tuple(out)
+
+
+def _area_m2(uv: npt.NDArray[np.float32], cell_m: float = 0.1) -> float:
+    """Return the area of the plane's 10 cm cells that hold points."""
+    return len(np.unique(grid_of(uv, cell_m), axis=0)) * cell_m**2
 
 
 def _facing(
