@@ -39,6 +39,12 @@ class Gen3Errors:
     speckle: float = 0.2  # chance a point on a boundary takes its neighbour's label
     speckle_m: float = 0.02  # boundary: another object within this distance
 
+    def __post_init__(self) -> None:
+        for name in ("miss_rate", "bleed_share", "blob_rate", "speckle"):
+            if not 0.0 <= getattr(self, name) <= 0.9:
+                found = getattr(self, name)
+                raise ValueError(f"Gen3Errors.{name} must be in 0..0.9, got {found}; pass a share")
+
 
 def apply_errors(
     points: npt.NDArray[np.float64],
@@ -65,11 +71,12 @@ def apply_errors(
 
 def _set(
     labels: Labels, family: Labels, idx: npt.NDArray[np.intp], value: Labels | int, code: int
-) -> None:
-    """Give `idx` the labels `value`; mark the ones that changed with `code`."""
+) -> int:
+    """Give `idx` the labels `value`; mark the ones that changed with `code`; count them."""
     value = np.broadcast_to(np.asarray(value, np.uint8), idx.shape)
     changed = labels[idx] != value
     labels[idx], family[idx[changed]] = value, code
+    return int(changed.sum())
 
 
 def _swap(labels: Labels, family: Labels, truth: Labels, instances: npt.NDArray[np.int32],
@@ -113,13 +120,14 @@ def _blobs(tree: cKDTree, labels: Labels, family: Labels, truth: Labels,
            cfg: Gen3Errors, rng: np.random.Generator) -> None:  # fmt: skip
     """Paint small balls of a wrong object class, on objects (70 %) and on structure."""
     objects, others = np.flatnonzero(truth >= 4), np.flatnonzero((truth >= 1) & (truth < 4))
-    target, done = cfg.blob_rate * len(objects), 0
-    while done < target and len(objects) and len(others):
+    painted = np.zeros(len(labels), bool)
+    while painted.sum() < cfg.blob_rate * len(objects) and len(objects) and len(others):
         seed = rng.choice(objects if rng.random() < 0.7 else others)
         idx = _balls(tree, tree.data[seed], rng.uniform(*cfg.blob_diameter_m) / 2)
         wrong = rng.choice([c for c in range(4, 11) if c != truth[seed]])
+        idx = idx[truth[idx] != wrong]
         _set(labels, family, idx, wrong, BLOB)
-        done += len(idx)
+        painted[idx[family[idx] == BLOB]] = True
 
 
 def _speckle(tree: cKDTree, labels: Labels, family: Labels, instances: npt.NDArray[np.int32],
@@ -143,7 +151,7 @@ def _miss(tree: cKDTree, labels: Labels, family: Labels, truth: Labels,
     objects = np.flatnonzero(truth >= 4)
     missed = np.zeros(len(labels), bool)
     target, done = cfg.miss_rate * len(objects), 0
-    while done < target:
+    while done < target:  # miss_rate <= 0.9: points are left
         left = objects[~missed[objects]]
         seed = left[rng.integers(len(left))]
         idx = _balls(tree, tree.data[seed], rng.uniform(*cfg.miss_diameter_m) / 2)

@@ -40,6 +40,7 @@ class Gen3Scene:
     truth: npt.NDArray[np.uint8]  # (N,) true label; 0 for flying pixels
     up: npt.NDArray[np.float64]  # (3,) gravity-up in the cloud's frame
     instances: npt.NDArray[np.int32]  # (N,) true object (item) id, 0 for flying pixels
+    item_labels: npt.NDArray[np.uint8]  # (items + 1,) class of each item id placed; [0] = 0
     errors: npt.NDArray[np.uint8]  # (N,) error family that set the phase-I label (ERROR_NAMES)
 
 
@@ -95,7 +96,8 @@ def gen3_scene(
         points, up = points @ rot.T + rng.uniform(-3, 3, 3), rot @ up
     colors = _colors(instances, rng)
     cloud = LabelledCloud(points.astype(np.float32), colors, labels)
-    return Gen3Scene(cloud, truth, up, instances, family)
+    placed = np.array([0] + [item.label for item in items], np.uint8)
+    return Gen3Scene(cloud, truth, up, instances, placed, family)
 
 
 def _raycast(
