@@ -61,11 +61,12 @@ def apply_errors(
     labels[flying] = np.where(seen[flying] >= 4, seen[flying], 0)
     family[flying & (labels > 0)] = FLYING
     tree = cKDTree(points)
-    _swap(labels, family, truth, instances, cfg.swapped_objects, rng)
-    _bleed(points, labels, family, truth, instances, cfg, rng)
-    _blobs(tree, labels, family, truth, cfg, rng)
-    _speckle(tree, labels, family, instances, cfg, rng)
-    _miss(tree, labels, family, truth, instances, cfg, rng)
+    streams = rng.spawn(5)  # one per family: switching one off leaves the others' draws
+    _swap(labels, family, truth, instances, cfg.swapped_objects, streams[0])
+    _bleed(points, labels, family, truth, instances, cfg, streams[1])
+    _blobs(tree, labels, family, truth, cfg, streams[2])
+    _speckle(tree, labels, family, instances, cfg, streams[3])
+    _miss(tree, labels, family, truth, instances, cfg, streams[4])
     return labels, family
 
 

@@ -78,23 +78,26 @@ def gen3_scene(
         errors: the error process's rates and sizes; Gen3Errors() by default.
         rotate: express the cloud in a random frame (up is then not +z), as SLAM maps are.
     """
-    rng = np.random.default_rng(seed)
+    # a stream each for the room, the sensor, the errors and the rest: one change keeps the others
+    rng, sensor, errs, misc = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
+    )
     room = Room(rng.uniform(4.5, 7.0), rng.uniform(4.0, 6.0), rng.uniform(2.5, 3.0))
     layout = furnish(room, rng)
     items = structure(room, rng) + layout.items
     poses = camera_path(room, layout.free, rng, views)
-    hits = _raycast(items, poses, spacing_m, (noise_1m_m, max_range_m, flying_rate), rng)
-    points, part, seen = _fuse(hits, spacing_m, foliage_keep, rng)
+    hits = _raycast(items, poses, spacing_m, (noise_1m_m, max_range_m, flying_rate), sensor)
+    points, part, seen = _fuse(hits, spacing_m, foliage_keep, sensor)
     table = np.array([p[:2] for p in hits.parts] + [(0, 0)], np.int64)  # row -1: flying
     truth, instances = table[part, 0].astype(np.uint8), table[part, 1].astype(np.int32)
     labels, family = apply_errors(
-        points, truth, instances, table[seen, 0].astype(np.uint8), errors or Gen3Errors(), rng
+        points, truth, instances, table[seen, 0].astype(np.uint8), errors or Gen3Errors(), errs
     )
     up = np.array([0.0, 0.0, 1.0])
     if rotate:
-        rot = _random_rotation(rng)
-        points, up = points @ rot.T + rng.uniform(-3, 3, 3), rot @ up
-    colors = _colors(instances, rng)
+        rot = _random_rotation(misc)
+        points, up = points @ rot.T + misc.uniform(-3, 3, 3), rot @ up
+    colors = _colors(instances, misc)
     cloud = LabelledCloud(points.astype(np.float32), colors, labels)
     placed = np.array([0] + [item.label for item in items], np.uint8)
     return Gen3Scene(cloud, truth, up, instances, placed, family)

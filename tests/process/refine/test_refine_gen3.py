@@ -6,6 +6,7 @@ one small cloud.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 
 import numpy as np
@@ -125,3 +126,10 @@ def test_refinement_does_not_lower_f1_on_a_small_cloud() -> None:
         for p, c in result.phase_clouds().items()
     }
     assert f1["III"] >= f1["I"]
+
+
+def test_switching_one_family_off_keeps_the_cloud_and_the_other_families() -> None:
+    full, no_blobs = _scene(2, Gen3Errors()), _scene(2, replace(Gen3Errors(), blob_rate=0.0))
+    np.testing.assert_array_equal(full.cloud.points, no_blobs.cloud.points)
+    np.testing.assert_array_equal(full.errors == MISSED, no_blobs.errors == MISSED)
+    assert (full.errors == BLOB).any() and not (no_blobs.errors == BLOB).any()
