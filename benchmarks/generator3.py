@@ -77,7 +77,12 @@ def gen3_scene(
         foliage_keep: share of leaf voxels kept (thin leaves rarely survive fusion).
         errors: the error process's rates and sizes; Gen3Errors() by default.
         rotate: express the cloud in a random frame (up is then not +z), as SLAM maps are.
+
+    Raises:
+        ValueError: `spacing_m` outside 3 mm..10 cm (the voxel keys hold 16,384 cells a side).
     """
+    if not 0.003 <= spacing_m <= 0.1:
+        raise ValueError(f"spacing_m must be 0.003..0.1 m, got {spacing_m}; pick a map voxel size")
     # a stream each for the room, the sensor, the errors and the rest: one change keeps the others
     rng, sensor, errs, misc = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
@@ -118,6 +123,8 @@ def _raycast(
             leaf = bool(item.leaves[k]) if item.leaves else False
             scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
             hits.parts.append((item.label, instance, leaf))
+    if len(hits.parts) >= 8191:  # _fuse packs the mesh id into 13 bits
+        raise ValueError(f"at most 8,190 meshes per room, got {len(hits.parts)}; furnish less")
     step = spacing_m / 2.0  # one ray per voxel at 2 m
     width, height = int(_HFOV / step), int(_VFOV / step)
     fx, fy = width / 2 / np.tan(_HFOV / 2), height / 2 / np.tan(_VFOV / 2)

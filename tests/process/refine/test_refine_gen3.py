@@ -113,9 +113,11 @@ def test_defaults_make_every_family_and_flying_pixels_have_no_truth() -> None:
     assert (scene.cloud.labels[flying] >= 4).all()
 
 
-def test_bad_rate_is_refused() -> None:
+def test_bad_rate_or_spacing_is_refused() -> None:
     with pytest.raises(ValueError, match="miss_rate"):
         Gen3Errors(miss_rate=1.0)
+    with pytest.raises(ValueError, match="spacing_m"):
+        gen3_scene(spacing_m=0.001)
 
 
 def test_refinement_does_not_lower_f1_on_a_small_cloud() -> None:
