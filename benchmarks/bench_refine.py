@@ -83,7 +83,7 @@ def _command_rows(scene: SyntheticScene) -> list[Row]:
 
 
 def _generator_rows() -> list[Row]:
-    """F1 per phase and time on clouds of both generators at other sizes and densities."""
+    """F1 per phase and time on clouds of generators 1-3 at other sizes and densities."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from helpers_refine_sim import SimFusedMap, SimScene, sim_fused_map, sim_scene
 
