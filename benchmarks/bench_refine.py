@@ -1,9 +1,11 @@
-"""Refinement: speed and per-phase F1 on both test-cloud generators, method 1 vs 2, PCL clouds.
+"""Refinement: speed and per-phase F1 on the test-cloud generators, method 1 vs 2, PCL clouds.
 
 Generator 1 is the synthetic office (errors written in 3-D); generator 2 is the simulator's
 room labelled through degraded 2-D masks (tests/helpers_refine_sim.py), at four densities
-(50k-520k object points), and TSDF maps fused from degraded simulated keyframes; each with the
-defaults and with PAPER.md's literal reading (RefineConfig.paper()).
+(50k-520k object points), and TSDF maps fused from degraded simulated keyframes; generator 3 ray
+casts furnished rooms and writes its errors in 3-D without regard to the refinement
+(benchmarks/generator3.py). Each with the defaults and with PAPER.md's literal reading
+(RefineConfig.paper()).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import Row, best_of, run_with_peak_rss
+from benchmarks.generator3 import Gen3Scene, gen3_scene
 from benchmarks.synthetic_office import SyntheticScene, indoor_scene
 from capture.recording import LABEL_NAMES
 from process.cloud import LabelledCloud, read_cloud, write_ply
@@ -80,11 +83,11 @@ def _command_rows(scene: SyntheticScene) -> list[Row]:
 
 
 def _generator_rows() -> list[Row]:
-    """F1 per phase and time on clouds of both generators at other sizes and densities."""
+    """F1 per phase and time on clouds of generators 1-3 at other sizes and densities."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from helpers_refine_sim import SimFusedMap, SimScene, sim_fused_map, sim_scene
 
-    clouds: list[tuple[str, Callable[[], SyntheticScene | SimScene | SimFusedMap]]] = [
+    clouds: list[tuple[str, Callable[[], SyntheticScene | SimScene | SimFusedMap | Gen3Scene]]] = [
         ("gen 1 office, 3 cm", lambda: indoor_scene(seed=1, spacing_m=0.03)),
         ("gen 2 sim room, 2 cm", lambda: sim_scene(seed=0, spacing_m=0.02)),
         ("gen 2 sim room 5, 2.5 cm", lambda: sim_scene(seed=5, spacing_m=0.025)),
@@ -92,6 +95,10 @@ def _generator_rows() -> list[Row]:
         ("gen 2 sim room, 0.8 cm", lambda: sim_scene(seed=3, spacing_m=0.008)),
         ("TSDF map of 20 degraded sim keyframes", lambda: sim_fused_map(seed=0, keyframes=20)),
         ("same, room 1", lambda: sim_fused_map(seed=1, keyframes=20)),
+        ("gen 3 ray-cast room 4, 1.1 cm", lambda: gen3_scene(seed=4, spacing_m=0.011)),
+        ("gen 3 room 3, 1.8 cm", lambda: gen3_scene(seed=3, spacing_m=0.018)),
+        ("gen 3 room 5, 0.7 cm, up not +z",
+         lambda: gen3_scene(seed=5, spacing_m=0.007, rotate=True)),
     ]  # fmt: skip
     rows = []
     for name, make in clouds:
