@@ -144,15 +144,18 @@ def refine(
         # piece of the network's would otherwise take the object points DBSCAN set to 0
         seeds = np.where(np.isin(labels, OBJECT_LABELS), clusters, 0).astype(np.int32)
         prior = network[objects] if cfg.regrow_own_class_first else None
-        # a point the network calls ceiling, floor or wall is evidence against every object
-        said = None if cfg.regrow_structure else np.isin(network[objects], STRUCTURAL_LABELS)
+        # a point the network calls ceiling, floor or wall is evidence against every object,
+        # and so is standing behind a wall plane (walls.behind_walls)
         behind = behind_walls(cloud.points, planes.planes, cfg)[objects]
-        if behind.any():
-            said = behind if said is None else said | behind
+        keep_out = (
+            behind
+            if cfg.regrow_structure
+            else behind | np.isin(network[objects], STRUCTURAL_LABELS)
+        )
         n_behind = int((behind & (labels == 0)).sum())
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, up=planes.up, prior=prior,
-            keep_out=said, nest=cfg.nested_objects_yield, adopt_ratio=cfg.nested_adopt_ratio,
+            keep_out=keep_out, nest=cfg.nested_objects_yield, adopt_ratio=cfg.nested_adopt_ratio,
             table_top_m=cfg.table_top_m, rejoin=cfg.rejoin_own_class,
         )  # fmt: skip
         new_labels, new_clusters = grown.labels, grown.clusters

@@ -38,6 +38,7 @@ such maps. They count as unlabelled: regrowth may give them to the object around
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -56,30 +57,24 @@ def objects_on_walls(
     points: npt.NDArray[np.float32], planes: tuple[Plane, ...], cfg: RefineConfig
 ) -> tuple[Plane, ...]:
     """Return the planes, each wall's points in front of a parallel wall behind it given back."""
-    walls = [i for i, p in enumerate(planes) if p.label == Label.WALL and len(p.removed)]
-    if cfg.wall_object_depth_m <= 0 or len(walls) < 2:
+    if cfg.wall_object_depth_m <= 0:
         return planes
-    centre = points.mean(axis=0, dtype=np.float64)
-    parallel = math.cos(math.radians(cfg.horizontal_tolerance_deg))
     out = list(planes)
-    for a in walls:
+    for a, pairs in _parallel_walls(points, planes, cfg):
         front = np.zeros(len(planes[a].removed), bool)
         behind: list[int] = []
-        xyz = points[planes[a].removed].astype(np.float64)
-        for b in walls:
-            model = _facing(planes[b].model, centre)
-            if a == b or abs(float(planes[a].model[:3] @ model[:3])) < parallel:
-                continue
-            offset = xyz @ model[:3] + model[3]  # > 0: in front of wall b, into the room
+        xyz = points[planes[a].removed]
+        for b, model in pairs:
+            offset = xyz.astype(np.float64) @ model[:3] + model[3]  # > 0: in front of wall b
             if not 0 < float(np.median(offset)) <= cfg.wall_object_depth_m:
                 continue  # not in front of b, or too far in front to hang on it
-            # ... and within b's extent: a wall stands in front of a door recess, not on it
-            wall = plane_uv(points[planes[b].removed], model)
-            uv = plane_uv(points[planes[a].removed], model)
-            within = np.all((uv >= wall.min(axis=0)) & (uv <= wall.max(axis=0)), axis=1)
+            # ... within b's extent (a wall stands in front of a door recess, not on it), and
+            # smaller than b (TUM: a wall before a smaller plane)
+            uv, within = _within_extent(xyz, points[planes[b].removed], model)
             given = (offset > cfg.plane_distance_m) & (offset <= cfg.wall_object_depth_m) & within
+            wall = plane_uv(points[planes[b].removed], model)
             if given.any() and _area_m2(uv[given]) < _area_m2(wall):
-                front |= given  # ... and smaller than it (TUM: a wall before a smaller plane)
+                front |= given
                 behind.append(b)
         if front.any():
             note = (
@@ -106,32 +101,64 @@ def furniture_fronts(
     but stands `wall_object_depth_m`-`furniture_depth_m` in front of a larger parallel wall and
     ends more than `furniture_top_gap_m` below that wall's top.
     """
-    walls = [i for i, p in enumerate(planes) if p.label == Label.WALL and len(p.removed)]
-    if heights is None or cfg.furniture_depth_m <= 0 or len(walls) < 2:
+    if heights is None or cfg.furniture_depth_m <= 0:
         return planes
-    centre = points.mean(axis=0, dtype=np.float64)
-    parallel = math.cos(math.radians(cfg.horizontal_tolerance_deg))
-    top = {i: float(np.percentile(heights[planes[i].removed], 99)) for i in walls}
     out = list(planes)
-    for a in walls:
+    for a, pairs in _parallel_walls(points, planes, cfg):
         median = np.median(points[planes[a].removed].astype(np.float64), axis=0)
-        for b in walls:
-            model = _facing(planes[b].model, centre)
-            if a == b or abs(float(planes[a].model[:3] @ model[:3])) < parallel:
-                continue
+        top_a = float(np.percentile(heights[planes[a].removed], 99))
+        for b, model in pairs:
             depth = float(median @ model[:3] + model[3])
+            gap = float(np.percentile(heights[planes[b].removed], 99)) - top_a
             if (
                 len(planes[b].removed) > len(planes[a].removed)
                 and cfg.wall_object_depth_m < depth <= cfg.furniture_depth_m
-                and top[a] < top[b] - cfg.furniture_top_gap_m
+                and gap > cfg.furniture_top_gap_m
             ):
                 note = (
-                    f"not a wall: {depth:.2f} m in front of wall {b} and {top[b] - top[a]:.2f} m"
-                    " below its top (furniture), given back to the objects"
+                    f"not a wall: {depth:.2f} m in front of wall {b} and {gap:.2f} m below its"
+                    " top (furniture), given back to the objects"
                 )
                 out[a] = replace(planes[a], label=0, removed=planes[a].removed[:0], note=note)
                 break
     return tuple(out)
+
+
+def _parallel_walls(
+    points: npt.NDArray[np.float32], planes: tuple[Plane, ...], cfg: RefineConfig
+) -> Iterator[tuple[int, list[tuple[int, npt.NDArray[np.float64]]]]]:
+    """Yield each wall and the other walls parallel to it, each facing the room's centre."""
+    walls = [i for i, p in enumerate(planes) if p.label == Label.WALL and len(p.removed)]
+    if len(walls) < 2:
+        return
+    centre = points.mean(axis=0, dtype=np.float64)
+    parallel = math.cos(math.radians(cfg.horizontal_tolerance_deg))
+    facing = {b: _facing(planes[b].model, centre) for b in walls}
+    for a in walls:
+        normal = planes[a].model[:3]
+        yield (
+            a,
+            [
+                (b, facing[b])
+                for b in walls
+                if b != a and abs(float(normal @ facing[b][:3])) >= parallel
+            ],
+        )
+
+
+def _within_extent(
+    xyz: npt.NDArray[np.float32], wall: npt.NDArray[np.float32], model: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+    """Return the points' (u, v) on the wall's plane, and which lie within the wall's extent.
+
+    The extent: the box of the wall's own points along it and up it (a plane extended past a
+    wall's ends would cut through a room).
+    """
+    own, uv = plane_uv(wall, model), plane_uv(xyz, model)
+    inside: npt.NDArray[np.bool_] = np.all(
+        (uv >= own.min(axis=0)) & (uv <= own.max(axis=0)), axis=1
+    )
+    return uv, inside
 
 
 def _area_m2(uv: npt.NDArray[np.float32], cell_m: float = 0.1) -> float:
@@ -195,9 +222,7 @@ def behind_walls(
 ) -> npt.NDArray[np.bool_]:
     """Return the points more than `wall_keep_out_m` behind a wall plane, within its extent.
 
-    Behind: on the side away from the room's centre. Within its extent: inside the box of the
-    wall's own points along the wall and up it (a wall plane extended past its ends would cut
-    through an L-shaped room).
+    Behind: on the side away from the room's centre.
     """
     out = np.zeros(len(points), bool)
     walls = [p for p in planes if p.label == Label.WALL and len(p.removed)]
@@ -208,11 +233,7 @@ def behind_walls(
         model = _facing(wall.model, centre)
         offset = points @ model[:3].astype(np.float32) + np.float32(model[3])
         candidates = np.flatnonzero(offset < -cfg.wall_keep_out_m)
-        if not len(candidates):
-            continue
-        own = plane_uv(points[wall.removed], model)
-        low, high = own.min(axis=0), own.max(axis=0)
-        uv = plane_uv(points[candidates], model)
-        inside = np.all((uv >= low) & (uv <= high), axis=1)
-        out[candidates[inside]] = True
+        if len(candidates):
+            _, inside = _within_extent(points[candidates], points[wall.removed], model)
+            out[candidates[inside]] = True
     return out

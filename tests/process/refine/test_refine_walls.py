@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 from helpers_refine import grid_patch
 
+from benchmarks.generator3 import gen3_scene
 from capture.recording import Label
-from process.refine import RefineConfig
+from process.refine import RefineConfig, refine
 from process.refine.plane_grid import local_plane, wide_object_regions
 from process.refine.planes import Plane, segment_planes
 from process.refine.walls import behind_walls, furniture_fronts, objects_on_walls
@@ -92,6 +93,29 @@ def test_a_wall_in_front_of_a_door_recess_is_not_an_object_on_the_door() -> None
     hung = (planes[0], _plane(points, np.arange(n + d, n + d + s), 0.06))
     out = objects_on_walls(points, hung, RefineConfig())
     assert out[1].on_wall == s and out[0].on_wall == 0
+
+
+def test_a_wall_before_a_smaller_plane_spread_along_it_is_no_object_on_it() -> None:
+    """Two narrow recesses at a wall's ends: their box spans the wall, their area does not."""
+    wall = _wall(0.0, (0.3, 3.7), 2.5)
+    recesses = np.concatenate([_wall(-0.1, (0.0, 0.3), 2.5), _wall(-0.1, (3.7, 4.0), 2.5)])
+    room = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)  # the floor: the room is at y > 0
+    points = np.concatenate([wall, recesses, room])
+    n, r = len(wall), len(recesses)
+    planes = (_plane(points, np.arange(n), 0.0), _plane(points, np.arange(n, n + r), -0.1))
+    assert objects_on_walls(points, planes, RefineConfig())[0].on_wall == 0
+
+
+def test_regrowth_leaves_a_door_recess_behind_a_wall_alone() -> None:
+    """Generator 3's room 0 (2 cm): a desk stands beside the door in the wall y = 0."""
+    scene = gen3_scene(seed=0, spacing_m=0.02)
+    recess = (scene.truth == Label.WALL) & (scene.cloud.points[:, 1] < -0.03)
+    assert recess.sum() > 3000
+    kept_out = refine(scene.cloud, RefineConfig(), up=scene.up)
+    crossed = refine(scene.cloud, RefineConfig(wall_keep_out_m=0.0), up=scene.up)
+    assert (kept_out.labels_iii[recess] >= Label.TABLE).sum() < 50  # 14
+    assert (crossed.labels_iii[recess] >= Label.TABLE).sum() > 400  # 815 regrown as objects
+    assert kept_out.behind_walls > 3000 and crossed.behind_walls == 0
 
 
 def test_label_bleed_around_feet_on_a_floor_goes_with_the_floor() -> None:
