@@ -72,7 +72,7 @@ class RefineConfig:
     nested_objects_yield: bool = True  # an object inside another class's box regrows only
     # the points the network gave its class (regrowth.py: a wrong-class patch stays small)
     nested_adopt_ratio: float = 3.0  # ... and takes its host's class where the host object
-    # has this many times its points (0: never)
+    # has this many times its points and it lies on the host, not just in its box (0: never)
     table_top_m: float = 0.02  # regrowth: a table's box reaches this far above its top,
     # not r1: clutter on it that DBSCAN set to 0 stays off the table (0: r1, the paper's)
     rejoin_own_class: bool = True  # after regrowth, a point still 0 inside an object of its

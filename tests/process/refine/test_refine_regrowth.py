@@ -219,6 +219,28 @@ def test_a_nested_patch_takes_its_hosts_class_when_the_host_outweighs_it() -> No
     assert (kept.labels[patch] == 5).all() and len(kept.adopted) == 0
 
 
+def test_a_cluster_inside_a_hosts_box_but_not_on_it_keeps_its_class() -> None:
+    """A chair under a seated person: in the person's box and outweighed, but apart from them.
+
+    The person: two 1 m x 1.2 m sheets (back and front, 0.8 m apart); the chair: a 40 cm
+    square seat half-way between them, 40 cm from either. A patch on the front sheet is on it.
+    """
+    person = np.concatenate([grid_patch((0.0, 1.0), (0.0, 1.2))[:, [0, 2, 1]] + (0, y, 0)
+                             for y in (0.0, 0.8)])  # fmt: skip
+    seat = grid_patch((0.3, 0.7), (0.2, 0.6), z=0.5)
+    on = np.linalg.norm(person[:, [0, 2]] - (0.5, 0.6), axis=1) < 0.1
+    on &= person[:, 1] > 0.5  # a 20 cm patch on the front sheet
+    points = np.concatenate([person, seat]).astype(np.float32)
+    labels = np.r_[np.where(on, 10, 6), np.full(len(seat), 5)].astype(np.uint8)
+    clusters = np.r_[np.where(on, 3, 1), np.full(len(seat), 2)].astype(np.int32)
+    kw = {"r1_m": {5: 0.05, 6: 0.05, 10: 0.05}, "up": np.array([0.0, 0.0, 1.0]), "prior": labels}
+    grown = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
+    assert len(person) - on.sum() >= 3 * len(seat)  # outweighed, as a seated person's chair
+    assert (grown.labels[len(person) :] == 5).all()  # not on the person: still a chair
+    assert (grown.labels[: len(person)][on] == 6).all()  # on the person: adopted
+    assert grown.adopted.tolist() == np.flatnonzero(on).tolist()
+
+
 def test_own_class_points_beyond_r1_rejoin_their_object_unless_another_class_holds_them() -> None:
     """Chair legs the network labelled, 30 cm below the seat (r1 5 cm), rejoin the chair; a
     chair-labelled point inside the table's box too, or only in the table's, stays 0."""
