@@ -203,11 +203,12 @@ def _whole_objects(
     family: npt.NDArray[np.uint8],
     rng: np.random.Generator,
 ) -> None:
-    """A quarter of the small objects (under 1.5 % of the object points) get another class."""
-    for inst in objects:
+    """A quarter (at least one) of the small objects (< 1.5 % of object points) change class."""
+    small = [i for i in objects if (t.instances == i).sum() < 0.015 * n_object]
+    count = max(1, int(rng.binomial(len(small), 0.25))) if small else 0
+    for inst in rng.choice(small, count, replace=False) if small else []:
         idx = np.flatnonzero(t.instances == inst)
-        if len(idx) < 0.015 * n_object and rng.random() < 0.25:
-            _set(idx, int(rng.choice(_CONFUSED[int(t.truth[idx[0]])])), 6, labels, family)
+        _set(idx, int(rng.choice(_CONFUSED[int(t.truth[idx[0]])])), 6, labels, family)
 
 
 def _structure_errors(
@@ -242,10 +243,12 @@ def _missed_patches(
     pool = np.flatnonzero(is_object)
     weight = np.array([_MISS_WEIGHT[int(c)] for c in t.truth[pool]])
     target = share * len(pool)
+    patches = 0
     while (missed := int((family[pool] == 1).sum())) < target:
-        live = family[pool] != 1
-        p = weight * live
-        batch = max(1, min(50, int((target - missed) / max(1.0, len(pool) / 2000))))
+        p = weight * (family[pool] != 1)
+        per_patch = missed / patches if missed else len(pool) / 2000
+        batch = max(1, min(50, int((target - missed) / (2 * per_patch))))
+        patches += batch
         for center in rng.choice(pool, batch, replace=False, p=p / p.sum()):
             idx = np.asarray(
                 t.tree.query_ball_point(t.points[center], rng.uniform(0.04, 0.125)), np.intp
