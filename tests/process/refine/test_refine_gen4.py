@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.generator4 import FAMILIES, Gen4Scene, gen4_scene
+from benchmarks.generator4 import FAMILIES, Gen4Scene, gen4_scene, main
 from capture.recording import Label
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
@@ -97,3 +97,14 @@ def test_refine_lifts_the_small_office_from_075_to_091() -> None:
     assert f1["I"] == pytest.approx(0.753, abs=0.005)
     assert f1["III"] >= 0.87
     assert f1["III"] >= f1["I"] + 0.12
+
+
+def test_the_command_prints_counts_families_and_both_configs(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    main(["3", "5000"])
+    out = capsys.readouterr().out
+    assert out.startswith("room meeting: 8250 points")
+    assert "table          truth" in out
+    assert all(f"error {name}" in out for name in FAMILIES[1:])
+    assert [line.split()[0] for line in out.splitlines()[-2:]] == ["defaults", "paper()"]
