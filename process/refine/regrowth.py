@@ -108,7 +108,10 @@ def regrow(
     hosts = _hosts(table) if nest else np.zeros((len(ids), len(ids)), bool)
     nested = np.asarray(hosts.any(axis=1), bool)
     adopted = _adopt(table, hosts, points, clusters, ids, adopt_ratio) if nested.any() else []
+    host_of = dict(adopted)
     for nested_row, host in adopted:
+        for _ in range(len(host_of)):  # a host adopted in turn passes on its own host's class
+            host = host_of.get(host, host)
         labels[clusters == ids[nested_row]] = table.label[nested_row] = table.label[host]
         nested[nested_row] = False
     reach = table.high.copy()  # the boxes' tops at r1, before tables' are cut
@@ -303,7 +306,11 @@ def _adopt(
     for row in np.flatnonzero(hosts.any(axis=1)):
         candidates = np.flatnonzero(hosts[row])
         host = int(candidates[np.argmax(per_object[table.object[candidates]])])
-        if per_object[table.object[host]] < ratio * sizes[row]:
+        # a part of a larger object of its own class is that object's, not a patch on the
+        # host (a chair's leg beside a box); a table's object chains over gaps to the
+        # table-labelled patches on chairs beside it, so a table cluster is weighed alone
+        own = sizes[row] if table.label[row] == Label.TABLE else per_object[table.object[row]]
+        if per_object[table.object[host]] < ratio * own:
             continue
         host_points = points[np.isin(clusters, ids[table.object == table.object[host]])]
         near, _ = cKDTree(host_points).query(
