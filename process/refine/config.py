@@ -73,6 +73,8 @@ class RefineConfig:
     # the points the network gave its class (regrowth.py: a wrong-class patch stays small)
     nested_adopt_ratio: float = 3.0  # ... and takes its host's class where the host object
     # has this many times its points and it lies on the host, not just in its box (0: never)
+    nested_patch_max_m: float = 0.7  # ... but only a patch nests: a cluster whose box has a
+    # longer diagonal is an object of its own (a chair under a seated person); 0: any size
     table_top_m: float = 0.02  # regrowth: a table's box reaches this far above its top,
     # not r1: clutter on it that DBSCAN set to 0 stays off the table (0: r1, the paper's)
     rejoin_own_class: bool = True  # after regrowth, a point still 0 inside an object of its
@@ -139,6 +141,7 @@ class RefineConfig:
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
             "nested_adopt_ratio": (self.nested_adopt_ratio, 0.0, 10**6),
+            "nested_patch_max_m": (self.nested_patch_max_m, 0.0, 10**3),
             "table_top_m": (self.table_top_m, 0.0, 1.0),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),

@@ -314,3 +314,30 @@ def test_a_patch_on_an_adopted_cluster_takes_the_class_its_host_ends_with() -> N
                    adopt_ratio=3.0, prior=labels.astype(np.uint8), **kw)  # type: ignore[arg-type]  # fmt: skip
     assert (grown.labels[n[0] : n[1]] == 10).all()  # the board is the box's
     assert (grown.labels[: n[0]] == 10).all()  # and so is the speck on it
+
+
+def test_a_chair_under_a_seated_person_is_an_object_not_a_patch() -> None:
+    """A 50 x 50 cm seat and back with a missed patch, a person sitting on it: the thighs 4 cm
+    above the seat, the back 8 cm before the chair's, and the legs, torso and arms around. The chair
+    lies in the person's box, on the person and outweighed, but its box is no patch's: it
+    keeps its class and refills its hole."""
+    seat = grid_patch((0.0, 0.5), (0.0, 0.5), z=0.45)
+    back = grid_patch((0.0, 0.5), (0.45, 0.95))[:, [0, 2, 1]] + (0.0, 0.5, 0.0)
+    chair = np.concatenate([seat, back])
+    hole = np.linalg.norm(chair[:, [0, 2]] - (0.25, 0.7), axis=1) < 0.1
+    thighs = grid_patch((0.05, 0.45), (0.0, 0.46), z=0.49)
+    torso = np.concatenate([grid_patch((0.0, 0.5), (0.49, 1.4))[:, [0, 2, 1]] + (0, y, 0)
+                            for y in (0.42, 0.31, 0.2)])  # fmt: skip
+    shins = grid_patch((0.05, 0.45), (0.0, 0.49))[:, [0, 2, 1]] + (0.0, -0.02, 0.0)
+    arms = np.concatenate([grid_patch((0.0, 0.56), (0.5, 0.9))[:, [2, 0, 1]] + (x, 0, 0)
+                           for x in (-0.04, 0.54)])  # fmt: skip
+    person = np.concatenate([thighs, torso, shins, arms])
+    points = np.concatenate([chair, person]).astype(np.float32)
+    labels = np.r_[np.where(hole, 0, 5), np.full(len(person), 6)].astype(np.uint8)
+    clusters = np.r_[np.where(hole, 0, 1), np.full(len(person), 2)].astype(np.int32)
+    assert len(person) >= 3 * (~hole).sum() and np.linalg.norm(np.ptp(chair, axis=0)) > 0.7
+    kw = {"r1_m": {5: 0.05, 6: 0.05}, "up": np.array([0.0, 0.0, 1.0]), "prior": labels}
+    patch = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
+    own = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, patch_max_m=0.7, **kw)  # type: ignore[arg-type]
+    assert (patch.labels[: len(chair)] == 6).mean() > 0.9  # as a patch: the person's
+    assert (own.labels[: len(chair)] == 5).all()  # an object: a chair, its hole refilled
