@@ -305,11 +305,16 @@ def _visible(
 ) -> npt.NDArray[np.bool_]:
     """Return which points are neither inside another part's solid nor outside the room."""
     keep = (points[:, 2] > -0.003) & (points[:, 2] < h + 0.003)
+    floor = points[part_of == 0]
+    # a face pressed against the floor or a wall (a sofa's back, a cabinet's bottom) is never
+    # seen by a camera: only structure lies on the room's boundary
+    on_boundary = points[:, 2] < 0.003
     for axis in (0, 1):  # walls stand at the extremes of the floor's x and y
-        floor = points[part_of == 0]
-        keep &= (points[:, axis] > floor[:, axis].min() - 0.003) & (
-            points[:, axis] < floor[:, axis].max() + 0.003
-        )
+        low, high = floor[:, axis].min(), floor[:, axis].max()
+        keep &= (points[:, axis] > low - 0.003) & (points[:, axis] < high + 0.003)
+        on_boundary |= (points[:, axis] < low + 0.003) | (points[:, axis] > high - 0.003)
+    structure = np.array([Label.CEILING <= p.label <= Label.WALL for p in parts])
+    keep &= ~on_boundary | structure[part_of]
     order = np.argsort(points[:, 0])
     xs = points[order, 0]
     for i, part in enumerate(parts):

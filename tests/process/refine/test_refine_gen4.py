@@ -89,12 +89,25 @@ def test_a_bad_room_is_refused() -> None:
         gen4_scene(room="garage")
 
 
-def test_refine_lifts_the_small_office_from_075_to_091() -> None:
-    """Measured once (seed 0, 20k object points): phase I 0.753, phase III 0.906."""
+def test_faces_pressed_against_the_floor_or_a_wall_are_not_sampled() -> None:
+    """A camera never sees a sofa's back against the wall or a cabinet's bottom."""
+    scene = gen4_scene(seed=2, object_points=SMALL, noise_m=0.0, tilt=False)
+    points, objects = scene.cloud.points.astype(np.float64), scene.truth >= Label.TABLE
+    floor, walls = points[scene.truth == Label.FLOOR], points[scene.truth == Label.WALL]
+    assert (points[objects, 2] - floor[:, 2].mean() > 0.002).all()
+    for axis in (0, 1):
+        low, high = walls[:, axis].min(), walls[:, axis].max()
+        assert (
+            (points[objects, axis] > low + 0.002) & (points[objects, axis] < high - 0.002)
+        ).all()
+
+
+def test_refine_lifts_the_small_office_from_072_to_088() -> None:
+    """Measured once (seed 0, 20k object points): phase I 0.717, phase III 0.885."""
     scene = gen4_scene(seed=0, object_points=SMALL)
     phases = refine(scene.cloud, RefineConfig(), up=scene.up).phase_clouds()
     f1 = {k: label_metrics(c.labels, scene.truth)["all"]["f1"] for k, c in phases.items()}
-    assert f1["I"] == pytest.approx(0.753, abs=0.005)
+    assert f1["I"] == pytest.approx(0.717, abs=0.005)
     assert f1["III"] >= 0.87
     assert f1["III"] >= f1["I"] + 0.12
 
