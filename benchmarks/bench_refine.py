@@ -4,8 +4,9 @@ Generator 1 is the synthetic office (errors written in 3-D); generator 2 is the 
 room labelled through degraded 2-D masks (tests/helpers_refine_sim.py), at four densities
 (50k-520k object points), and TSDF maps fused from degraded simulated keyframes; generator 3 ray
 casts furnished rooms and writes its errors in 3-D without regard to the refinement
-(benchmarks/generator3.py). Each with the defaults and with PAPER.md's literal reading
-(RefineConfig.paper()).
+(benchmarks/generator3.py); generator 4, written blind to the refinement too, samples mesh
+surfaces uniformly, object-heavy as the issue's held-out clouds (benchmarks/generator4.py). Each
+with the defaults and with PAPER.md's literal reading (RefineConfig.paper()).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 
 from benchmarks.common import Row, best_of, run_with_peak_rss
 from benchmarks.generator3 import Gen3Scene, gen3_scene
+from benchmarks.generator4 import Gen4Scene, gen4_scene
 from benchmarks.synthetic_office import SyntheticScene, indoor_scene
 from capture.recording import LABEL_NAMES
 from process.cloud import LabelledCloud, read_cloud, write_ply
@@ -83,11 +85,12 @@ def _command_rows(scene: SyntheticScene) -> list[Row]:
 
 
 def _generator_rows() -> list[Row]:
-    """F1 per phase and time on clouds of generators 1-3 at other sizes and densities."""
+    """F1 per phase and time on clouds of generators 1-4 at other sizes and densities."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from helpers_refine_sim import SimFusedMap, SimScene, sim_fused_map, sim_scene
 
-    clouds: list[tuple[str, Callable[[], SyntheticScene | SimScene | SimFusedMap | Gen3Scene]]] = [
+    Scene = SyntheticScene | SimScene | SimFusedMap | Gen3Scene | Gen4Scene
+    clouds: list[tuple[str, Callable[[], Scene]]] = [
         ("gen 1 office, 3 cm", lambda: indoor_scene(seed=1, spacing_m=0.03)),
         ("gen 2 sim room, 2 cm", lambda: sim_scene(seed=0, spacing_m=0.02)),
         ("gen 2 sim room 5, 2.5 cm", lambda: sim_scene(seed=5, spacing_m=0.025)),
@@ -99,6 +102,9 @@ def _generator_rows() -> list[Row]:
         ("gen 3 room 3, 1.8 cm", lambda: gen3_scene(seed=3, spacing_m=0.018)),
         ("gen 3 room 5, 0.7 cm, up not +z",
          lambda: gen3_scene(seed=5, spacing_m=0.007, rotate=True)),
+        ("gen 4 uniform-sampled office", lambda: gen4_scene(seed=4, object_points=200_000)),
+        ("gen 4 kitchen", lambda: gen4_scene(seed=1, object_points=60_000)),
+        ("gen 4 meeting room", lambda: gen4_scene(seed=11, object_points=500_000)),
     ]  # fmt: skip
     rows = []
     for name, make in clouds:
