@@ -213,9 +213,14 @@ def _colors(instances: npt.NDArray[np.int32], rng: np.random.Generator) -> npt.N
 
 
 def main(argv: list[str]) -> int:
-    seed = int(argv[0]) if argv else 0
-    spacing = float(argv[1]) if len(argv) > 1 else 0.01
-    scene = gen3_scene(seed=seed, spacing_m=spacing)
+    """Generate one room and print its counts per error family; 2 on bad arguments."""
+    try:
+        seed = int(argv[0]) if argv else 0
+        spacing = float(argv[1]) if len(argv) > 1 else 0.01
+        scene = gen3_scene(seed=seed, spacing_m=spacing)
+    except ValueError as err:
+        print(f"usage: python -m benchmarks.generator3 [SEED] [SPACING_M]: {err}", file=sys.stderr)
+        return 2
     objects = int((scene.truth >= 4).sum())
     print(f"{len(scene.cloud):,} points, {objects:,} on objects")
     for code, name in enumerate(ERROR_NAMES):

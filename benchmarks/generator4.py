@@ -267,16 +267,22 @@ def _report(scene: Gen4Scene) -> None:
         print(f"  error {name:<16} {int((scene.family == i).sum()):>8} points")
 
 
-def main(argv: list[str]) -> None:
+def main(argv: list[str]) -> int:
     """Generate one cloud, print its counts and the refinement's phase F1, defaults and paper()."""
     import time
 
     from process.evaluate import label_metrics
     from process.refine import RefineConfig, refine
 
-    seed = int(argv[0]) if argv else 0
-    object_points = int(argv[1]) if len(argv) > 1 else 200_000
-    scene = gen4_scene(seed=seed, object_points=object_points)
+    try:
+        seed = int(argv[0]) if argv else 0
+        object_points = int(argv[1]) if len(argv) > 1 else 200_000
+        scene = gen4_scene(seed=seed, object_points=object_points)
+    except ValueError as err:
+        print(
+            f"usage: python -m benchmarks.generator4 [SEED] [OBJECT_POINTS]: {err}", file=sys.stderr
+        )
+        return 2
     _report(scene)
     for name, config in (("defaults", RefineConfig()), ("paper()", RefineConfig.paper())):
         start = time.perf_counter()
@@ -287,7 +293,8 @@ def main(argv: list[str]) -> None:
             m = label_metrics(cloud.labels, scene.truth)["all"]
             row.append(f"{phase} F1 {m['f1']:.3f} (P {m['precision']:.3f} R {m['recall']:.3f})")
         print(f"{name:<9} {'  '.join(row)}  refine {seconds:.1f} s")
+    return 0
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    sys.exit(main(sys.argv[1:]))

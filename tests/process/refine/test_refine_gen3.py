@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 
 from benchmarks.gen3_errors import BLEED, BLOB, FLYING, MISSED, SWAPPED, Gen3Errors
 from benchmarks.generator3 import Gen3Scene, gen3_scene
+from benchmarks.generator3 import main as gen3_main
 from process.evaluate import label_metrics
 from process.refine import RefineConfig, refine
 
@@ -135,3 +136,12 @@ def test_switching_one_family_off_keeps_the_cloud_and_the_other_families() -> No
     np.testing.assert_array_equal(full.cloud.points, no_blobs.cloud.points)
     np.testing.assert_array_equal(full.errors == MISSED, no_blobs.errors == MISSED)
     assert (full.errors == BLOB).any() and not (no_blobs.errors == BLOB).any()
+
+
+@pytest.mark.parametrize("argv", [["x"], ["0", "-1"]])
+def test_the_command_refuses_bad_arguments_in_one_line(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert gen3_main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: python -m benchmarks.generator3") and err.count("\n") == 1

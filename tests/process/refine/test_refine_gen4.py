@@ -121,3 +121,12 @@ def test_the_command_prints_counts_families_and_both_configs(
     assert "table          truth" in out
     assert all(f"error {name}" in out for name in FAMILIES[1:])
     assert [line.split()[0] for line in out.splitlines()[-2:]] == ["defaults", "paper()"]
+
+
+@pytest.mark.parametrize("argv", [["abc"], ["1", "10"]])
+def test_the_command_refuses_bad_arguments_in_one_line(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: python -m benchmarks.generator4") and err.count("\n") == 1
