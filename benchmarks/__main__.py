@@ -20,6 +20,12 @@ def main(selected: list[str]) -> int:
     names = sorted(
         i.name for i in pkgutil.iter_modules(benchmarks.__path__) if i.name.startswith("bench_")
     )
+    unknown = [s for s in selected if not any(s in name for name in names)]
+    if unknown:
+        areas = ", ".join(n.removeprefix("bench_") for n in names)
+        print(f"no benchmark matches {', '.join(unknown)}; expected one of: {areas}, fuzz",
+              file=sys.stderr)  # fmt: skip
+        return 2
     for name in names:
         if selected and not any(s in name for s in selected):
             continue

@@ -14,13 +14,22 @@ import numpy as np
 
 from process import outputs
 from process.cloud import read_cloud
+from process.errors import ReplayError
 from process.preview import render_top_view, up_vector
 
 
 def main(argv: list[str]) -> int:
+    """Write the run folder's fused and refined maps side by side; 2 on bad arguments."""
+    if len(argv) != 2:
+        print("usage: python -m benchmarks.map_pictures RUN_DIR OUT.png", file=sys.stderr)
+        return 2
     run, out = Path(argv[0]), Path(argv[1])
-    fused = read_cloud(run / outputs.MAP_FUSED)
-    refined = read_cloud(run / outputs.MAP_REFINED)
+    try:
+        fused = read_cloud(run / outputs.MAP_FUSED)
+        refined = read_cloud(run / outputs.MAP_REFINED)
+    except ReplayError as err:
+        print(f"map_pictures: {err} (expected a `process run` output folder)", file=sys.stderr)
+        return 2
     up = up_vector(refined.points, refined.labels, None)
     views = []
     for title, cloud in (("phase I: fused", fused), ("phase III: refined", refined)):
