@@ -278,7 +278,8 @@ def _hosts(table: _Clusters, patch_max_m: float = 0.0) -> npt.NDArray[np.bool_]:
     screen takes a few wall points behind it along). The cluster's, not its object's: a
     table-labelled patch on a chair's back 15 cm from the table is one object with the table.
     Nothing is nested in a table: the clutter on it and the chairs under it are objects (on
-    TSDF maps of degraded sim keyframes, clutter then lost 99 points to the table).
+    TSDF maps of degraded sim keyframes, clutter then lost 99 points to the table). With
+    `patch_max_m`, only a cluster whose own box has at most that diagonal is nested: a patch.
     """
     low, high = table.own_low, table.own_high
     inside = np.all((table.low[None] <= low[:, None]) & (high[:, None] <= table.high[None]), axis=2)
@@ -303,7 +304,10 @@ def _adopt(
     On: `ON_HOST_SHARE` of the cluster's points lie within 2 r1 of the host object's points, as
     a wrong-class patch on a screen or a chair's back does. A chair under a seated person lies
     in the person's box and is outweighed, but only 2-89 % of its points are near the person
-    (generator 3: adoption alone turned 13,600 chair points into person in one room).
+    (generator 3: adoption alone turned 13,600 chair points into person in one room). The
+    host must outweigh the cluster's own object, not the cluster alone, unless it is a table's
+    (table objects chain over gaps to the table patches on chairs beside them): a chair's leg
+    beside a box on the floor is part of a chair larger than the box.
     """
     if ratio <= 0:
         return []
