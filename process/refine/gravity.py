@@ -26,6 +26,8 @@ from capture.recording import Label
 _SNAP_UP_DEG = 40.0  # a given `up` is replaced by the normal of the largest plane this close to it
 _MAX_HINT_DEG = 65.0  # with network evidence: up lies within this of the hint
 _MIN_EVIDENCE = 0.05  # ... and at least this share of the planes' inliers carry structure labels
+_MIN_OBJECT_POINTS = 100  # without a hint, this many object-labelled points orient a table top
+_BOUNDARY_SHARE = 0.05  # a plane with at most this share of the points on a side bounds the room
 
 Found = list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]]  # (plane model, inliers)
 
@@ -41,7 +43,8 @@ def gravity(
     """Return (gravity-up, how it was found) from the hint `up`, the planes and the labels.
 
     Sources: "labelled planes" (the network's structure labels chose among plane normals near
-    the hint), "argument snapped to plane", "argument", "largest plane" (no hint) or "none".
+    the hint), "argument snapped to plane", "argument", "largest plane" (no hint), "largest
+    plane, objects below" (no hint, the plane has points on both sides) or "none".
     """
     if up is not None:
         up = np.asarray(up, np.float64) / np.linalg.norm(up)
@@ -60,8 +63,23 @@ def gravity(
         return None, "none"
     # no gravity given: the largest plane is taken as the floor, facing the bulk of the points
     model = max(found, key=lambda t: len(t[1]))[0]
-    side = np.median(points @ model[:3].astype(np.float32) + np.float32(model[3]))
+    heights = points @ model[:3].astype(np.float32) + np.float32(model[3])
+    objects = heights[labels >= Label.TABLE] if labels is not None else heights[:0]
+    if _inside_the_room(heights) and len(objects) >= _MIN_OBJECT_POINTS:
+        # not a floor but a large table top (generator 4's object-heavy kitchen, in a random
+        # frame): furniture and people fill the lower part of the room, so up faces away from
+        # the end nearer the objects' median
+        low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
+        side = (low + high) / 2 - float(np.median(objects))
+        return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane, objects below"
+    side = np.median(heights)
     return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane"
+
+
+def _inside_the_room(heights: npt.NDArray[np.float32]) -> bool:
+    """Return whether a plane has more than `_BOUNDARY_SHARE` of the points on either side."""
+    above, below = float(np.mean(heights > 0.05)), float(np.mean(heights < -0.05))
+    return min(above, below) > _BOUNDARY_SHARE
 
 
 def _labelled_up(

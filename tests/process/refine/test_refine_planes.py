@@ -201,3 +201,26 @@ def test_floor_labels_well_above_the_floor_count_as_unlabelled() -> None:
     assert (seg.object_labels(labels)[-len(mat) :] == Label.FLOOR).all()  # 4 cm: still floor
     off = RefineConfig(**{**CFG.__dict__, "floor_label_max_m": 0.0})
     assert segment_planes(cloud, off, up=UP, labels=labels).not_floor is None
+
+
+def test_without_gravity_a_table_top_largest_plane_is_oriented_by_the_objects() -> None:
+    """A 3 x 2 m table top is the largest plane, with more points below it (a floor, chairs)
+    than above (a ceiling, a monitor): facing the bulk would turn the room upside down; the
+    objects stand in the lower part of the room."""
+    top = grid_patch((0.0, 3.0), (0.0, 2.0), z=0.75)  # 15,000 points
+    floor = grid_patch((0.0, 2.5), (0.0, 2.0), z=0.0)  # 12,500
+    ceiling = grid_patch((0.0, 1.0), (0.0, 1.0), z=2.5)
+    sheet = grid_patch((0.0, 0.4), (0.1, 0.6))[:, [0, 2, 1]]  # a chair's 40 x 50 cm side
+    offsets = [np.array([x, y, 0.0]) for x in (0.2, 0.9, 1.6, 2.3) for y in (0.2, 0.7, 1.2, 1.7)]
+    chairs = np.concatenate([sheet + offset for offset in offsets])
+    monitor = grid_patch((1.5, 2.5), (0.8, 1.2))[:, [0, 2, 1]] + (0.0, 1.0, 0.0)
+    points = np.concatenate([top, floor, ceiling, chairs, monitor]).astype(np.float32)
+    counts = [len(top), len(floor) + len(ceiling), len(chairs), len(monitor)]
+    labels = np.repeat(np.array([4, 0, 5, 9], np.uint8), counts)
+    assert np.median(points[:, 2]) < 0.75 - 0.05  # the bulk lies below the top
+    unlabelled = segment_planes(points, CFG, up=None)
+    assert unlabelled.up_source == "largest plane" and unlabelled.up is not None
+    assert unlabelled.up @ UP == pytest.approx(-1.0, abs=1e-6)  # facing the bulk: upside down
+    seg = segment_planes(points, CFG, up=None, labels=labels)
+    assert seg.up_source == "largest plane, objects below"
+    assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-6)
