@@ -57,9 +57,7 @@ class PlaneSegmentation:
     planes: tuple[Plane, ...]
     labels: npt.NDArray[np.uint8]  # (N,) 1/2/3 on structural planes, 0 elsewhere
     up: npt.NDArray[np.float64] | None  # (3,) unit gravity-up; None when it could not be found
-    up_source: (
-        str  # "argument", "argument snapped to plane", "largest plane[, objects below]", "none"
-    )
+    up_source: str  # how `up` was found: one of gravity.gravity's sources
     min_points: int = 0  # the Min used: a plane needs this many inliers
     density_per_m2: float = math.nan  # the cloud's surface density it was derived from
     table: npt.NDArray[np.bool_] | None = None  # (N,) points of table surfaces, made table

@@ -70,9 +70,9 @@ def objects_on_walls(
                 continue  # not in front of b, or too far in front to hang on it
             # ... within b's extent (a wall stands in front of a door recess, not on it), and
             # smaller than b (TUM: a wall before a smaller plane)
-            uv, within = _within_extent(xyz, points[planes[b].removed], model)
-            given = (offset > cfg.plane_distance_m) & (offset <= cfg.wall_object_depth_m) & within
-            wall = plane_uv(points[planes[b].removed], model)
+            uv, wall = plane_uv(xyz, model), plane_uv(points[planes[b].removed], model)
+            given = (offset > cfg.plane_distance_m) & (offset <= cfg.wall_object_depth_m)
+            given &= _within_extent(uv, wall)
             if given.any() and _area_m2(uv[given]) < _area_m2(wall):
                 front |= given
                 behind.append(b)
@@ -147,18 +147,17 @@ def _parallel_walls(
 
 
 def _within_extent(
-    xyz: npt.NDArray[np.float32], wall: npt.NDArray[np.float32], model: npt.NDArray[np.float64]
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
-    """Return the points' (u, v) on the wall's plane, and which lie within the wall's extent.
+    uv: npt.NDArray[np.float32], wall: npt.NDArray[np.float32]
+) -> npt.NDArray[np.bool_]:
+    """Return which points (u, v on a wall's plane) lie within the wall's extent.
 
-    The extent: the box of the wall's own points along it and up it (a plane extended past a
-    wall's ends would cut through a room).
+    The extent: the box of the wall's own points (`wall`, u, v) along it and up it (a plane
+    extended past a wall's ends would cut through a room).
     """
-    own, uv = plane_uv(wall, model), plane_uv(xyz, model)
     inside: npt.NDArray[np.bool_] = np.all(
-        (uv >= own.min(axis=0)) & (uv <= own.max(axis=0)), axis=1
+        (uv >= wall.min(axis=0)) & (uv <= wall.max(axis=0)), axis=1
     )
-    return uv, inside
+    return inside
 
 
 def _area_m2(uv: npt.NDArray[np.float32], cell_m: float = 0.1) -> float:
@@ -234,6 +233,6 @@ def behind_walls(
         offset = points @ model[:3].astype(np.float32) + np.float32(model[3])
         candidates = np.flatnonzero(offset < -cfg.wall_keep_out_m)
         if len(candidates):
-            _, inside = _within_extent(points[candidates], points[wall.removed], model)
-            out[candidates[inside]] = True
+            uv, own = plane_uv(points[candidates], model), plane_uv(points[wall.removed], model)
+            out[candidates[_within_extent(uv, own)]] = True
     return out

@@ -10,6 +10,7 @@ from helpers_refine import grid_patch
 from benchmarks.generator3 import gen3_scene
 from capture.recording import Label
 from process.refine import RefineConfig, refine
+from process.refine.job import refinement_metrics
 from process.refine.plane_grid import local_plane, wide_object_regions
 from process.refine.planes import Plane, segment_planes
 from process.refine.walls import behind_walls, furniture_fronts, objects_on_walls
@@ -116,6 +117,8 @@ def test_regrowth_leaves_a_door_recess_behind_a_wall_alone() -> None:
     assert (kept_out.labels_iii[recess] >= Label.TABLE).sum() < 50  # 14
     assert (crossed.labels_iii[recess] >= Label.TABLE).sum() > 400  # 815 regrown as objects
     assert kept_out.behind_walls > 3000 and crossed.behind_walls == 0
+    section = refinement_metrics(kept_out, gt_cloud=None)
+    assert section["points"]["behind_walls_left_out"] == kept_out.behind_walls
 
 
 def test_label_bleed_around_feet_on_a_floor_goes_with_the_floor() -> None:
