@@ -71,7 +71,7 @@ MAP_KINDS: Final[dict[str, str]] = {"fused": MAP_FUSED, "refined": MAP_REFINED}
 MAP_RGB_CHILD: Final = "rgb"  # `<map>/rgb`: the same points in their colours, hidden by default
 REFINE: Final = "/world/refine"
 REFINE_KINDS: Final[dict[str, str]] = {
-    kind: f"{REFINE}/{kind}" for kind in ("planes", "outliers", "clusters", "regrown")
+    kind: f"{REFINE}/{kind}" for kind in ("planes", "outliers", "clusters", "regrown", "seams")
 }
 
 # Plots (scalars) and logs.

@@ -19,7 +19,7 @@ from capture.recording import Intrinsics, RgbdFrame
 
 TrajectoryKind = Literal["estimated", "ground_truth"]
 MapKind = Literal["fused", "refined"]
-RefineKind = Literal["planes", "outliers", "clusters", "regrown"]
+RefineKind = Literal["planes", "outliers", "clusters", "regrown", "seams"]
 FloatArray = npt.NDArray[np.floating]
 IntArray = npt.NDArray[np.integer]
 

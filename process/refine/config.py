@@ -81,6 +81,11 @@ class RefineConfig:
     # phase-I class (not a table), and of no other class, joins it beyond r1 (regrowth.py)
     tabletop_objects: bool = True  # after regrowth, points still 0 of one object class that
     # stand on a table's top, min_cluster_points of them, become an object (tabletop.py)
+    seam_vote_m: float = 0.08  # after regrowth, an object point this close to another class
+    # takes the class of the smooth surface it lies on, if that class holds most of it and the
+    # point's own object lies mostly elsewhere: a label bled across a contact (seams.py); 0: off
+    seam_angle_deg: float = 15.0  # ... neighbours with normals this close share a surface,
+    seam_flatness: float = 0.06  # ... where both vary less than this off their local plane
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -116,6 +121,7 @@ class RefineConfig:
             "table_top_m": 0.0,
             "rejoin_own_class": False,
             "tabletop_objects": False,
+            "seam_vote_m": 0.0,
             "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})
@@ -143,6 +149,9 @@ class RefineConfig:
             "nested_adopt_ratio": (self.nested_adopt_ratio, 0.0, 10**6),
             "nested_patch_max_m": (self.nested_patch_max_m, 0.0, 10**3),
             "table_top_m": (self.table_top_m, 0.0, 1.0),
+            "seam_vote_m": (self.seam_vote_m, 0.0, 1.0),
+            "seam_angle_deg": (self.seam_angle_deg, 0.0, 90.0),
+            "seam_flatness": (self.seam_flatness, 0.0, 1.0 / 3.0),
             "max_eps_m": (self.max_eps_m, 0.0, 10.0),
             "plane_object_width_m": (self.plane_object_width_m, 0.0, 10.0),
             "wall_object_depth_m": (self.wall_object_depth_m, 0.0, 10.0),

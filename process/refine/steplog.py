@@ -37,6 +37,8 @@ def log_steps(result: RefineResult, viz: Logger) -> None:
     viz.set_stage(STAGE_REGROWTH)
     regrown = result.regrown_cloud()
     viz.log_refine("regrown", regrown.points, labels=regrown.labels, clusters=regrown.clusters)
+    seams = result.seam_cloud()
+    viz.log_refine("seams", seams.points, labels=seams.labels, clusters=seams.clusters)
     viz.set_stage(STAGE_FINAL)
     final = result.final()
     viz.log_map("refined", final.points, colors=final.colors, labels=final.labels)

@@ -19,6 +19,7 @@ from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_par
 from process.refine.outliers import sor_inliers
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
+from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
 from process.refine.walls import behind_walls
 
@@ -63,6 +64,8 @@ class RefineResult:
     tabletop: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of the small objects found standing on tables after regrowth (tabletop.py)
     behind_walls: int = 0  # unlabelled points behind a wall plane that regrowth left out
+    seams: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices that took the class of the smooth surface they lie on (seams.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -97,6 +100,12 @@ class RefineResult:
         """Return the object points DBSCAN kept, with their class and cluster."""
         keep = (self.clusters_ii > 0) & ~self.planes.structural
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
+
+    def seam_cloud(self) -> LabelledCloud:
+        """Return the points the seam vote relabelled, with their new class."""
+        return self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii).select(
+            self.seams
+        )
 
     def regrown_cloud(self) -> LabelledCloud:
         """Return the points regrowth labelled, with their new class and cluster."""
@@ -171,12 +180,20 @@ def refine(
         regrown, r2, adopted = objects[grown.regrown], grown.r2_m, objects[grown.adopted]
         above, rejoined = grown.above_tables, grown.rejoined
     lap("regrowth")
+    seams = np.zeros(0, np.intp)
+    if cfg.seam_vote_m > 0:
+        vote = seam_vote(
+            cloud.points, labels_iii, clusters_iii, seam_m=cfg.seam_vote_m,
+            angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness,
+        )  # fmt: skip
+        labels_iii, seams = vote.labels, vote.relabelled
+        lap("seams")
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind,
+        rejoined, tabletop, n_behind, seams,
     )  # fmt: skip
 
 

@@ -50,7 +50,7 @@ def test_paths_of_the_architecture_page_are_spelled_as_it_does() -> None:
     }
     assert set(layout.MAP_KINDS.values()) == {"/world/map/fused", "/world/map/refined"}
     assert set(layout.REFINE_KINDS.values()) == {
-        f"/world/refine/{n}" for n in ("planes", "outliers", "clusters", "regrown")
+        f"/world/refine/{n}" for n in ("planes", "outliers", "clusters", "regrown", "seams")
     }
     assert layout.LOGS == "/logs"
 

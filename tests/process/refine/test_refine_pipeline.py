@@ -33,7 +33,7 @@ def test_f1_over_target_classes_rises_from_phase_i_to_iii(office: SyntheticScene
     assert f1["I"] < 0.8  # the generator's label-transfer errors
     assert f1["III"] > 0.9 and f1["III"] > f1["I"] + 0.1
     assert {p.label for p in result.planes.planes} >= {2, 3}
-    assert set(result.seconds) == {"planes", "sor", "dbscan", "regrowth", "total"}
+    assert set(result.seconds) == {"planes", "sor", "dbscan", "regrowth", "seams", "total"}
     for entry in result.dbscan.values():
         assert entry.choice is not None and entry.curves is not None
         assert entry.curves.eps_m[entry.choice.k - 1] == entry.choice.eps_m
@@ -143,7 +143,7 @@ def test_refine_and_log_logs_every_step_in_stage_order(office: SyntheticScene) -
     )
     assert [c[1] for c in viz.calls if c[0] == "set_stage"] == [1, 2, 3, 4, 5]
     kinds = [c[1] for c in viz.calls if c[0] == "log_refine"]
-    assert kinds == ["planes", "outliers", "clusters", "regrown"]
+    assert kinds == ["planes", "outliers", "clusters", "regrown", "seams"]
     curves = [c for c in viz.calls if c[0] == "log_dbscan_curves"]
     assert {c[1] for c in curves} == {e for e in section["dbscan"]}
     for _, _, kwargs in curves:

@@ -1,0 +1,140 @@
+"""Labels at the seams of touching objects follow the smooth surface they lie on.
+
+A network's label bleeds a few centimetres across the contact of two objects: a seated
+person's label onto the chair's seat, a chair's onto the person's back, a desk's onto a
+monitor's foot. DBSCAN keeps the bleed with the cluster it touches and regrowth keeps it too.
+Here the object points are joined into smooth surfaces: neighbours whose normals agree, that
+lie in each other's tangent plane, both on locally flat ground (low surface variation, so a
+surface does not creep round an arm or a bottle lying on a table). A point whose class is not
+its surface's majority, lying within `seam_vote_m` of a point of that majority class, takes it
+when:
+- the majority holds at least `MAJORITY` of the surface, and
+- its own cluster lies mostly elsewhere (a fringe of an object beyond this surface), not
+  mostly on it (a book or a keyboard lying flat on a desk is an object of its own).
+
+Written here because neither Open3D nor SciPy has smooth-surface region growing (PCL's
+RegionGrowing is not a dependency); the graph's connected components are SciPy's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import open3d as o3d
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from capture.recording import OBJECT_LABELS
+
+NEIGHBOURS = 10  # graph edges per point
+NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface variation)
+MAJORITY = 0.6  # a surface's class holds this share of its points
+FRINGE = 0.5  # a point flips only if less than this share of its cluster is on the surface
+MIN_SURFACE = 50  # points a surface needs to vote
+
+
+@dataclass(frozen=True)
+class SeamVote:
+    """The labels after the vote and the points it relabelled (indices into the input)."""
+
+    labels: npt.NDArray[np.uint8]
+    relabelled: npt.NDArray[np.intp]
+
+
+def seam_vote(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    *,
+    seam_m: float,
+    angle_deg: float,
+    flatness: float,
+) -> SeamVote:
+    """Relabel object points at class seams by the majority of the smooth surface they lie on.
+
+    Args:
+        points: (N, 3) positions.
+        labels: (N,) class per point; only object classes vote or change.
+        clusters: (N,) object id per point (0: none), for the fringe test.
+        seam_m: a point changes only within this distance of its surface's majority class.
+        angle_deg: neighbours whose normals differ by more are not on one surface.
+        flatness: points of larger surface variation (l0 / (l0 + l1 + l2)) join no surface.
+    """
+    out = labels.copy()
+    objects = np.flatnonzero(np.isin(labels, OBJECT_LABELS))
+    if (
+        len(objects) < max(MIN_SURFACE, NORMAL_NEIGHBOURS + 1)
+        or len(np.unique(labels[objects])) < 2
+    ):
+        return SeamVote(out, np.zeros(0, np.intp))
+    xyz = np.asarray(points[objects], np.float64)
+    own = labels[objects]
+    surface = _surfaces(xyz, angle_deg=angle_deg, flatness=flatness)
+    major, share, size = _majority(surface, own)
+    candidate = (
+        (own != major[surface]) & (share[surface] >= MAJORITY) & (size[surface] >= MIN_SURFACE)
+    )
+    candidate &= _on_surface_share(clusters[objects], surface) < FRINGE
+    flip = np.zeros(len(objects), bool)
+    for target in np.unique(major[surface][candidate]):
+        rows = np.flatnonzero(candidate & (major[surface] == target))
+        near, _ = cKDTree(xyz[own == target]).query(xyz[rows], distance_upper_bound=seam_m)
+        flip[rows[np.isfinite(near)]] = True
+    out[objects[flip]] = major[surface][flip]
+    return SeamVote(out, objects[flip])
+
+
+def _surfaces(
+    xyz: npt.NDArray[np.float64], *, angle_deg: float, flatness: float
+) -> npt.NDArray[np.int32]:
+    """Return a smooth-surface id per point: components of the flat, coplanar-neighbour graph."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
+    cloud.estimate_covariances(o3d.geometry.KDTreeSearchParamKNN(NORMAL_NEIGHBOURS))
+    values, vectors = np.linalg.eigh(np.asarray(cloud.covariances))
+    normals = vectors[:, :, 0]  # the direction of least spread
+    flat = values[:, 0] / np.maximum(values.sum(axis=1), 1e-18) < flatness
+    dist, nb = cKDTree(xyz).query(xyz, NEIGHBOURS + 1, workers=-1)
+    spacing = float(np.median(dist[:, 1]))
+    i = np.repeat(np.arange(len(xyz)), NEIGHBOURS)
+    j, d = nb[:, 1:].ravel(), dist[:, 1:].ravel()
+    ok = (d < 4 * spacing) & flat[i] & flat[j]
+    i, j = i[ok], j[ok]
+    ok = np.abs((normals[i] * normals[j]).sum(axis=1)) > np.cos(np.radians(angle_deg))
+    ok &= np.abs(((xyz[j] - xyz[i]) * normals[i]).sum(axis=1)) < spacing  # in i's tangent plane
+    graph = coo_matrix((np.ones(ok.sum()), (i[ok], j[ok])), shape=(len(xyz), len(xyz)))
+    _, surface = connected_components(graph.tocsr(), directed=False)
+    ids: npt.NDArray[np.int32] = np.asarray(surface, np.int32)
+    return ids
+
+
+def _majority(
+    surface: npt.NDArray[np.int32], labels: npt.NDArray[np.uint8]
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """Return per surface its most common class, that class's share and the surface's size."""
+    key = surface.astype(np.int64) * 256 + labels
+    pairs, counts = np.unique(key, return_counts=True)
+    ids, classes = pairs // 256, pairs % 256
+    order = np.lexsort((-counts, ids))  # per surface, its largest class first
+    first = order[np.unique(ids[order], return_index=True)[1]]
+    n = int(surface.max()) + 1
+    major, top = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    major[ids[first]], top[ids[first]] = classes[first], counts[first]
+    size = np.bincount(surface, minlength=n)
+    return major, top / np.maximum(size, 1), size
+
+
+def _on_surface_share(
+    clusters: npt.NDArray[np.int32], surface: npt.NDArray[np.int32]
+) -> npt.NDArray[np.float64]:
+    """Return per point the share of its cluster's points on its surface (0: no cluster)."""
+    _, cluster_row = np.unique(clusters, return_inverse=True)
+    _, pair_row, pair_count = np.unique(
+        cluster_row.astype(np.int64) * (int(surface.max()) + 1) + surface,
+        return_inverse=True,
+        return_counts=True,
+    )
+    share = pair_count[pair_row] / np.bincount(cluster_row)[cluster_row]
+    return np.where(clusters > 0, share, 0.0)
