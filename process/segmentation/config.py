@@ -8,12 +8,12 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import NUM_LABELS
 from process.errors import ConfigError
 
 BACKENDS: Final = ("torch", "onnx", "tflite", "combined")
 MODELS: Final = ("auto", "simulator", "voc", "ade20k", "combined")
 DEVICES: Final = ("auto", "cpu", "cuda")
-N_LABELS: Final = 11  # RECORDING.md labels 0-10 (capture.recording.NUM_LABELS)
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ class SegmentationConfig:
                 f"segmentation.model must be one of {list(MODELS)}, got {self.model!r}"
             )
         if any(
-            isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < N_LABELS
+            isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < NUM_LABELS
             for v in self.class_to_label
         ):
             raise ConfigError(
