@@ -6,8 +6,10 @@ combined teacher on held-out real frames, mIoU on unseen simulated rooms.
 Real frames: TUM RGB-D `freiburg1_rpy` (../shared/data, or SEMREPLAY_SHARED_DATA), the frames in
 HELD_OUT (the last fifth of the sequence, every 20th, never used to train anything). Agreement
 is the share of pixels whose label equals the combined teacher's: agreement, not accuracy (the
-teacher is not ground truth). Simulated rooms: SIM_SEEDS, never used for training, against
-their exact `/ground_truth/labels`, mIoU by `process.evaluate.confusion_miou` (labels 1-10).
+teacher is not ground truth). A checkpoint whose training frames (`trained_frames` in its
+info, written by `semreplay-process train`) span a held-out frame is refused. Simulated rooms:
+SIM_SEEDS, never used for training, against their exact `/ground_truth/labels`, mIoU by
+`process.evaluate.confusion_miou` (labels 1-10).
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -28,6 +32,7 @@ from capture.recording import LABEL_NAMES, NUM_LABELS, RecordingReader
 from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.segmentation import SegmentationConfig, Segmenter
 from process.segmentation.models import SHIPPED, ModelChoice, shipped
+from process.segmentation.weights import load_checkpoint
 
 SHARED = Path(
     os.environ.get("SEMREPLAY_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
@@ -73,6 +78,30 @@ def real_frames() -> list[npt.NDArray[np.uint8]]:
     return [read_rgb(files[i]) for i in HELD_OUT if files]
 
 
+def held_out_stamps_ns() -> list[int]:
+    """Return the stamps of the held-out TUM frames (their file names) in ns, [] when absent."""
+    files = tum_files()
+    return [stamp_ns(files[i].stem) for i in HELD_OUT if files]
+
+
+def stamp_ns(text: str) -> int:
+    """Return a TUM stamp ("1305031248.861712", seconds) in integer nanoseconds, as imported."""
+    seconds, _, fraction = text.partition(".")
+    return int(seconds) * 10**9 + int(fraction.ljust(9, "0")[:9])
+
+
+def check_held_out(info: Mapping[str, Any], held_out: Sequence[int], name: str) -> None:
+    """Raise ValueError if a checkpoint's training frames span one of the held-out stamps."""
+    for span in info.get("trained_frames", []):
+        inside = [s for s in held_out if span["first_stamp_ns"] <= s <= span["last_stamp_ns"]]
+        if inside:
+            raise ValueError(
+                f"{name} was trained on {span['frames']} frames of {span['recording']} whose "
+                f"stamps span {len(inside)} held-out frame(s) (the first at {inside[0]} ns); "
+                "its agreement would not be held out: train on frames that end before them"
+            )
+
+
 def sim_frames(tmp: Path) -> list[tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8]]]:
     """Return (colour, ground-truth labels) of the simulated rooms."""
     from capture.sim import simulate_recording
@@ -99,6 +128,9 @@ def measure(
 
     `checkpoints`: more models (our checkpoints, e.g. a distilled student) to measure.
     """
+    held_out = held_out_stamps_ns()
+    for path in checkpoints:
+        check_held_out(load_checkpoint(path).info, held_out, path.name)
     real = real_frames()
     with tempfile.TemporaryDirectory() as tmp:
         sim = sim_frames(Path(tmp))

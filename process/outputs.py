@@ -236,7 +236,15 @@ def summary_table(metrics: Mapping[str, Any], *, title: str = "semreplay process
         if odo.get(key) is not None:
             table.add_row("odometry", key, _fmt(odo[key]))
     seg = metrics.get("segmentation", {})
-    for key in ("model", "load_s", "keyframes", "ms_per_keyframe", "miou_2d"):
+    for key in (
+        "model",
+        "model_reason",  # why this model: the recording's device, --weights or the config
+        "threads",
+        "load_s",
+        "keyframes",
+        "ms_per_keyframe",
+        "miou_2d",
+    ):
         if seg.get(key) is not None:
             table.add_row("segmentation", key, _fmt(seg[key]))
     for key, value in metrics.get("refinement", {}).get("points", {}).items():

@@ -324,6 +324,7 @@ class ReplayPipeline:
         self._seg_model = {
             "model": choice.name,
             "model_reason": choice.reason,
+            "threads": cfg.threads,  # the runtime's; compare ms_per_keyframe at the same count
             "load_s": round(time.perf_counter() - t0, 3),
         }
         note = f"segmentation model: {choice.name} ({choice.backend}), because {choice.reason}"

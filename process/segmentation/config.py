@@ -8,6 +8,7 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from capture.recording import NUM_LABELS
 from process.errors import ConfigError
 
 BACKENDS: Final = ("torch", "onnx", "tflite", "combined")
@@ -25,6 +26,9 @@ class SegmentationConfig:
     # torch | onnx (onnxruntime) | tflite (ai-edge-litert, .tflite weights) | combined (the
     # shipped ADE20K and VOC .tflite networks per pixel)
     backend: str = "torch"
+    # A .tflite model's output class -> RECORDING.md label (0-10), one per class, for models
+    # of any class count; () = by the class count: 21 PASCAL VOC, 151 ADE20K (tflite_runtime).
+    class_to_label: tuple[int, ...] = ()
     device: str = "auto"  # auto = CUDA when present (torch backend)
     threads: int = 0  # CPU threads for the runtime; 0 = the runtime's default
     batch_size: int = 4  # keyframes per forward pass
@@ -43,6 +47,14 @@ class SegmentationConfig:
         if self.model not in MODELS:
             raise ConfigError(
                 f"segmentation.model must be one of {list(MODELS)}, got {self.model!r}"
+            )
+        if any(
+            isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < NUM_LABELS
+            for v in self.class_to_label
+        ):
+            raise ConfigError(
+                "segmentation.class_to_label must list one label 0-10 per model class, got "
+                f"{list(self.class_to_label)[:12]}"
             )
         if self.device not in DEVICES:
             raise ConfigError(

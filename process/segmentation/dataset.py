@@ -26,9 +26,22 @@ class LabelledImages:
 
     colors: npt.NDArray[np.uint8]  # (N, H, W, 3) RGB
     labels: npt.NDArray[np.uint8]  # (N, H, W) RECORDING.md ids, IGNORE = not evaluated
+    # Per recording: which frames were read (provenance; evaluation frames must lie outside)
+    sources: tuple[FrameSpan, ...] = ()
 
     def __len__(self) -> int:
         return len(self.colors)
+
+
+@dataclass(frozen=True)
+class FrameSpan:
+    """The frames one recording gave: file name, first and last stamp, count, how labelled."""
+
+    recording: str
+    first_stamp_ns: int
+    last_stamp_ns: int
+    frames: int
+    taught: bool  # labelled by a teacher network, not by ground truth
 
 
 def load_labelled(
@@ -46,7 +59,9 @@ def load_labelled(
     """
     colors: list[npt.NDArray[np.uint8]] = []
     labels: list[npt.NDArray[np.uint8]] = []
+    sources: list[FrameSpan] = []
     for path in recordings:
+        stamps: list[int] = []
         with RecordingReader(Path(path)) as rec:
             taught = teacher is not None and not rec.has_ground_truth_labels
             if not rec.has_ground_truth_labels and not taught:
@@ -68,6 +83,10 @@ def load_labelled(
                 color, label = _resize_pair(frame.color, truth, short_side_px)
                 colors.append(color)
                 labels.append(label)
+                stamps.append(frame.stamp_ns)
+            if stamps:
+                span = FrameSpan(Path(path).name, min(stamps), max(stamps), len(stamps), taught)
+                sources.append(span)
     if not colors:
         raise RecordingError(f"no frame with ground-truth labels in {[str(p) for p in recordings]}")
     sizes = {c.shape for c in colors}
@@ -76,7 +95,7 @@ def load_labelled(
             f"training recordings must share one image size after resizing, found {sorted(sizes)}"
         )
     logger.info("loaded %d labelled frames from %d recordings", len(colors), len(recordings))
-    return LabelledImages(np.stack(colors), np.stack(labels))
+    return LabelledImages(np.stack(colors), np.stack(labels), tuple(sources))
 
 
 def _resize_pair(

@@ -66,6 +66,12 @@ class Segmenter:
         logger.info("segmentation: %s on %s (%s)", choice.name, cfg.backend, self.device)
 
     def _make_runtime(self) -> Runtime:
+        if self.cfg.class_to_label and self.cfg.backend != "tflite":
+            raise ModelError(
+                "segmentation.class_to_label is for .tflite models; found backend "
+                f"{self.cfg.backend!r} (our checkpoints carry their own class map): "
+                f"{self.choice.path or self.choice.name}"
+            )
         if self.cfg.backend == "combined":
             if self.choice.path is not None:
                 raise ModelError(
@@ -90,7 +96,12 @@ class Segmenter:
                 f"the tflite backend needs a .tflite model, found {path.suffix!r} (or set "
                 f"segmentation.model = 'voc' or 'ade20k'): {path}"
             )
-        return TfliteRuntime(path, threads=self.cfg.threads, relabel=self._labels)
+        return TfliteRuntime(
+            path,
+            threads=self.cfg.threads,
+            class_to_label=self.cfg.class_to_label or None,
+            relabel=self._labels,
+        )
 
     def _network(self) -> Runtime:
         ckpt = load_checkpoint(self.weights_path)

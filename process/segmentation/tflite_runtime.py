@@ -39,7 +39,8 @@ def label_map_for(n_classes: int, path: Path) -> tuple[int, ...]:
         known = ", ".join(f"{n} ({name})" for n, (name, _) in KNOWN_LABEL_MAPS.items())
         raise ModelError(
             f"TFLite model has {n_classes} classes; expected one of {known} "
-            f"(pass a PASCAL VOC or ADE20K DeepLab model): {path}"
+            "(PASCAL VOC or ADE20K DeepLab), or give its map, one label 0-10 per class, as "
+            f"segmentation.class_to_label in --config: {path}"
         )
     return KNOWN_LABEL_MAPS[n_classes][1]
 
@@ -78,7 +79,8 @@ class TfliteRuntime:
         if self.n_classes != len(class_to_label):
             raise ModelError(
                 f"TFLite model has {self.n_classes} classes but the label map has "
-                f"{len(class_to_label)}; pass a map of one label per class: {path}"
+                f"{len(class_to_label)}; give one label per class (segmentation.class_to_label): "
+                f"{path}"
             )
         self.to_labels = label_matrix(relabel(class_to_label) if relabel else class_to_label)
 

@@ -17,6 +17,7 @@ from process.errors import ConfigError
 from process.evaluate import confusion_iou, confusion_miou
 from process.segmentation.dataset import (
     IGNORE,
+    FrameSpan,
     LabelledImages,
     augment_pair,
     class_weights,
@@ -125,6 +126,7 @@ def train(
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    _refuse_shared_recordings(recordings, val or ())
     data = load_labelled(
         recordings,
         short_side_px=cfg.short_side_px,
@@ -177,9 +179,19 @@ def train(
             best = (score, epoch)
             _save(
                 model, out, cfg=cfg, seed=seed, recordings=recordings, val=val, stats=stats,
-                teacher=teacher,
+                teacher=teacher, sources=data.sources,
             )  # fmt: skip
     return TrainResult(Path(out), history, best[1])
+
+
+def _refuse_shared_recordings(recordings: Sequence[Path], val: Sequence[Path]) -> None:
+    """Refuse validation recordings that are also training recordings (not held out)."""
+    shared = {Path(p).resolve() for p in recordings} & {Path(p).resolve() for p in val}
+    if shared:
+        raise ConfigError(
+            f"--val recording(s) {sorted(p.name for p in shared)} are also training recordings; "
+            "validate on recordings kept out of training"
+        )
 
 
 def _epoch(
@@ -250,6 +262,7 @@ def _save(
     val: Sequence[Path] | None,
     stats: EpochStats,
     teacher: str | None = None,
+    sources: Sequence[FrameSpan] = (),
 ) -> None:
     info = {
         "trained_by": "process.segmentation.train",
@@ -260,6 +273,8 @@ def _save(
         "val_recordings": [Path(p).name for p in val or []],
         "val_miou": stats.val_miou,
         "teacher": teacher,
+        # the frames trained on, per recording: a benchmark refuses to evaluate on them
+        "trained_frames": [asdict(span) for span in sources],
     }
     ckpt = checkpoint_from_model(model, short_side_px=cfg.short_side_px, info=info)
     save_checkpoint(ckpt, Path(out), half=cfg.half)

@@ -82,6 +82,10 @@ def test_the_rrd_verifies_and_holds_the_layout(run_twice: dict[str, Any]) -> Non
     assert any(e.startswith("/plots/dbscan") for e in entities)
     assert any(e.startswith("/plots/timing") for e in entities)
     assert contents.rows[("/world/camera/image/rgb", "frame")] == 30
+    # The log says which segmentation model ran and why (issue 11), as metrics.json does.
+    logs = [" ".join(map(str, t)) for t in contents.column("/logs", "TextLog:text")]
+    note = "segmentation model: simulator (torch), because simulated recording"
+    assert any(note in t for t in logs), logs[:3]
 
 
 def test_the_clouds_load_with_their_label_fields(run_twice: dict[str, Any]) -> None:
@@ -121,7 +125,7 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     assert {"frames", "keyframes", "fps", "ate_rmse_m", "rpe_trans_m", "rpe_rot_deg"} <= set(odo)
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
     seg = metrics["segmentation"]
-    assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d", "load_s"} <= set(seg)
+    assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d", "load_s", "threads"} <= set(seg)
     assert 1 <= seg["keyframes"] <= odo["keyframes"]
     assert seg["keyframes"] + seg["keyframes_geometry_only"] == odo["keyframes"]
     assert 0.0 <= seg["miou_2d"] <= 1.0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -66,6 +67,32 @@ def test_label_maps_follow_the_class_count(tmp_path: Path) -> None:
     assert label_map_for(151, tmp_path) == ade20k.ADE20K_CLASS_TO_LABEL
     with pytest.raises(ModelError, match=r"has 7 classes; expected one of 21 .*151"):
         label_map_for(7, tmp_path)
+
+
+def test_a_tflite_model_of_any_class_count_takes_its_map_from_the_config(tmp_path: Path) -> None:
+    """segmentation.class_to_label maps a model's classes when its class count is not known."""
+    with pytest.raises(ModelError, match=r"segmentation\.class_to_label in --config"):
+        label_map_for(19, tmp_path)  # e.g. a Cityscapes model: not 21 or 151 classes
+    image = np.random.default_rng(2).integers(0, 255, (96, 128, 3), dtype=np.uint8)
+    walls = (0, *([3] * 150))  # every ADE20K class read as wall: the config's map is used
+    cfg = SegmentationConfig(weights=str(ADE20K_TFLITE), class_to_label=walls, threads=1)
+    seg = Segmenter(cfg).segment(image)
+    assert set(np.unique(seg.labels)) <= {0, 3} and np.mean(seg.labels == 3) > 0.9
+    short = SegmentationConfig(weights=str(ADE20K_TFLITE), class_to_label=(3, 4), threads=1)
+    with pytest.raises(ModelError, match="151 classes but the label map has 2"):
+        Segmenter(short)
+    with pytest.raises(ModelError, match=r"class_to_label is for \.tflite models"):
+        Segmenter(SegmentationConfig(class_to_label=walls))  # the simulator checkpoint
+    with pytest.raises(ConfigError, match="one label 0-10 per model class"):
+        SegmentationConfig(class_to_label=(0, 11))
+    from process.config import load_config
+
+    toml = tmp_path / "c.toml"
+    toml.write_text("[segmentation]\nbackend = 'tflite'\nclass_to_label = [0, 2, 3, 10]\n")
+    assert load_config(toml).segmentation.class_to_label == (0, 2, 3, 10)
+    toml.write_text("[segmentation]\nclass_to_label = ['wall']\n")
+    with pytest.raises(ConfigError, match="one label 0-10 per model class"):
+        load_config(toml)
 
 
 def test_float_ade20k_and_int8_voc_models_load_with_their_class_counts() -> None:
@@ -206,3 +233,12 @@ def test_a_run_says_which_model_ran_and_why(recording: Path, tmp_path: Path) -> 
     assert (
         mine["model"] == SAMPLES_CHECKPOINT.name and mine["model_reason"] == "--weights was given"
     )
+    assert isinstance(real["threads"], int) and real["threads"] >= 1
+    # The summary table printed at the end of the run says which model ran and why, too.
+    from rich.console import Console
+
+    console = Console(width=400, record=True, file=io.StringIO())
+    console.print(outputs.summary_table({"segmentation": real}))
+    text = console.export_text()
+    assert "model_reason" in text and str(real["model_reason"]) in text
+    assert f"threads {real['threads']}" in " ".join(text.replace("│", " ").split())

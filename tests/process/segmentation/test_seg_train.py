@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -125,3 +126,28 @@ def test_train_config_rejects_bad_values() -> None:
         TrainConfig(arch="vgg")
     with pytest.raises(ConfigError, match="scale_range"):
         TrainConfig(scale_range=(1.5, 1.0))
+
+
+def test_a_checkpoint_names_its_training_frames_and_held_out_frames_stay_out(
+    tmp_path: Path,
+) -> None:
+    """Issue 11: frames evaluated on must be kept out of training; the checkpoint says which."""
+    from benchmarks.seg_models import check_held_out, stamp_ns
+
+    rec = write_labelled_recording(tmp_path / "train.mcap", frames=4, seed=1)
+    cfg = replace(TINY, bn_calibration_batches=0, threads=1)  # one step: 0.3 s
+    with pytest.raises(ConfigError, match=r"\['train.mcap'\] are also training recordings"):
+        train([rec], out=tmp_path / "x.safetensors", val=[rec], epochs=1, cfg=cfg, progress=False)
+    out = tmp_path / "one.safetensors"
+    train([rec], out=out, epochs=1, cfg=cfg, progress=False)
+    (span,) = load_checkpoint(out).info["trained_frames"]
+    first, last = 1_000_000_000, 1_000_000_000 + 3 * 33_333_333  # the helper's frame stamps
+    assert span == {
+        "recording": "train.mcap", "first_stamp_ns": first, "last_stamp_ns": last, "frames": 4,
+        "taught": False,
+    }  # fmt: skip
+    info = load_checkpoint(out).info
+    check_held_out(info, [first - 1, last + 1], "one")  # outside the trained frames: measured
+    with pytest.raises(ValueError, match="span 1 held-out frame"):
+        check_held_out(info, [last + 1, first + 33_333_333], "one")
+    assert stamp_ns("1305031248.861712") == 1_305_031_248_861_712_000  # as the TUM importer
