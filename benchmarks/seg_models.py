@@ -167,6 +167,19 @@ def measure(
     return out
 
 
+def steady_ms(name: str, *, threads: int) -> float:
+    """Return a shipped model's median ms per 640x480 frame on `threads` (load excluded)."""
+    cfg = SegmentationConfig(threads=threads)
+    seg = Segmenter(cfg, choice=shipped(name, "benchmark", cfg), device="cpu")
+    seg.warm_up()
+    times = []
+    for image in real_frames() or [np.full((480, 640, 3), 128, np.uint8)] * 5:
+        t0 = time.perf_counter()
+        seg.segment(image)
+        times.append(time.perf_counter() - t0)
+    return 1000 * statistics.median(times)
+
+
 def _half_size_agreement(
     seg: Segmenter, images: list[npt.NDArray[np.uint8]], labels: list[npt.NDArray[np.uint8]]
 ) -> float:

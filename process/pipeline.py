@@ -311,12 +311,13 @@ class ReplayPipeline:
     # -- the keyframe worker (its own thread) ------------------------------------------------
     def _make_segmenter(self, rec: RecordingReader) -> Segmenter:
         from process.segmentation import Segmenter
+        from process.segmentation.config import beside_odometry_threads
         from process.segmentation.models import choose_model
 
         t0 = time.perf_counter()
         cfg = self.cfg.segmentation
         if cfg.threads == 0:  # leave a core to the odometry
-            cfg = dataclasses.replace(cfg, threads=max(1, (os.cpu_count() or 2) - 1))
+            cfg = dataclasses.replace(cfg, threads=beside_odometry_threads())
         device = rec.metadata.get("device", {}).get("name")
         choice = choose_model(cfg, weights=self.weights, device_name=device)
         segmenter = Segmenter(cfg, choice=choice, device=self.device)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Final
 
@@ -81,3 +82,8 @@ class Segmentation:
 
     labels: npt.NDArray[np.uint8]  # (H, W) RECORDING.md label ids
     confidence: npt.NDArray[np.float32]  # (H, W) probability of the chosen label, in [0, 1]
+
+
+def beside_odometry_threads() -> int:
+    """Return the threads `process run` gives segmentation by default: all cores but one."""
+    return max(1, (os.cpu_count() or 2) - 1)

@@ -19,6 +19,7 @@ from process.cloud import read_cloud
 from process.errors import StageError
 from process.odometry.odometry import Odometry
 from process.pipeline import ReplayPipeline
+from process.segmentation.config import beside_odometry_threads
 from process.trajectory import Trajectory, read_tum
 
 runner = CliRunner()
@@ -126,6 +127,7 @@ def test_metrics_follow_the_schema(run_twice: dict[str, Any]) -> None:
     assert odo["frames"] == 30 and 0 < odo["keyframes"] <= 30
     seg = metrics["segmentation"]
     assert {"keyframes", "ms_per_keyframe", "miou_2d", "iou_2d", "load_s", "threads"} <= set(seg)
+    assert seg["threads"] == beside_odometry_threads()  # the count make bench's row uses
     assert 1 <= seg["keyframes"] <= odo["keyframes"]
     assert seg["keyframes"] + seg["keyframes_geometry_only"] == odo["keyframes"]
     assert 0.0 <= seg["miou_2d"] <= 1.0

@@ -196,3 +196,11 @@ def test_importing_the_package_does_not_import_torch() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, cwd=root, check=True
     )
     assert out.stdout.strip() == "False"
+
+
+def test_process_run_leaves_one_core_to_the_odometry(monkeypatch: pytest.MonkeyPatch) -> None:
+    from process.segmentation.config import beside_odometry_threads
+
+    for cores, threads in ((16, 15), (2, 1), (1, 1), (None, 1)):
+        monkeypatch.setattr("os.cpu_count", lambda c=cores: c)
+        assert beside_odometry_threads() == threads
