@@ -28,6 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS
+from process.refine.cells import capped_cells
 
 NEIGHBOURS = 10  # graph edges per point
 NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface variation)
@@ -52,6 +53,7 @@ def seam_vote(
     seam_m: float,
     angle_deg: float,
     flatness: float,
+    max_points: int = 400_000,
 ) -> SeamVote:
     """Relabel object points at class seams by the majority of the smooth surface they lie on.
 
@@ -62,6 +64,9 @@ def seam_vote(
         seam_m: a point changes only within this distance of its surface's majority class.
         angle_deg: neighbours whose normals differ by more are not on one surface.
         flatness: points of larger surface variation (l0 / (l0 + l1 + l2)) join no surface.
+        max_points: past this many object points the vote runs on the centroids of each
+            class's points per voxel (the finest voxel giving about this many), and every
+            point takes its centroid's verdict: the graph's memory stays bounded.
     """
     out = labels.copy()
     objects = np.flatnonzero(np.isin(labels, OBJECT_LABELS))
@@ -70,21 +75,54 @@ def seam_vote(
         or len(np.unique(labels[objects])) < 2
     ):
         return SeamVote(out, np.zeros(0, np.intp))
-    xyz = np.asarray(points[objects], np.float64)
-    own = labels[objects]
+    xyz = np.asarray(points[objects], np.float32)
+    own, ids = labels[objects], clusters[objects]
+    group = np.arange(len(objects))
+    if len(objects) > max_points:
+        xyz, own, ids, group = _class_cells(xyz, own, ids, max_points)
+    new = _vote(np.asarray(xyz, np.float64), own, ids, seam_m, angle_deg, flatness)[group]
+    flip = new != labels[objects]
+    out[objects[flip]] = new[flip]
+    return SeamVote(out, objects[flip])
+
+
+def _vote(
+    xyz: npt.NDArray[np.float64],
+    own: npt.NDArray[np.uint8],
+    ids: npt.NDArray[np.int32],
+    seam_m: float,
+    angle_deg: float,
+    flatness: float,
+) -> npt.NDArray[np.uint8]:
+    """Return the labels after the vote, for points each of one class and one cluster."""
     surface = _surfaces(xyz, angle_deg=angle_deg, flatness=flatness)
     major, share, size = _majority(surface, own)
-    candidate = (
-        (own != major[surface]) & (share[surface] >= MAJORITY) & (size[surface] >= MIN_SURFACE)
-    )
-    candidate &= _on_surface_share(clusters[objects], surface) < FRINGE
-    flip = np.zeros(len(objects), bool)
+    candidate = (own != major[surface]) & (share[surface] >= MAJORITY)
+    candidate &= (size[surface] >= MIN_SURFACE) & (_on_surface_share(ids, surface) < FRINGE)
+    out = own.copy()
     for target in np.unique(major[surface][candidate]):
         rows = np.flatnonzero(candidate & (major[surface] == target))
         near, _ = cKDTree(xyz[own == target]).query(xyz[rows], distance_upper_bound=seam_m)
-        flip[rows[np.isfinite(near)]] = True
-    out[objects[flip]] = major[surface][flip]
-    return SeamVote(out, objects[flip])
+        out[rows[np.isfinite(near)]] = target
+    return out
+
+
+def _class_cells(
+    xyz: npt.NDArray[np.float32],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    max_points: int,
+) -> tuple[
+    npt.NDArray[np.float32], npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]
+]:
+    """Return per (voxel, class) the centroid, class and first cluster, and each point's row."""
+    _, cell_of, _ = capped_cells(xyz, 0.0, max_points)
+    key = cell_of.astype(np.int64) * 256 + labels
+    _, first, group = np.unique(key, return_index=True, return_inverse=True)
+    group = group.reshape(-1)
+    counts = np.bincount(group).astype(np.float64)[:, None]
+    centroids = np.column_stack([np.bincount(group, weights=xyz[:, k]) for k in range(3)])
+    return (centroids / counts).astype(np.float32), labels[first], clusters[first], group
 
 
 def _surfaces(

@@ -184,7 +184,7 @@ def refine(
     if cfg.seam_vote_m > 0:
         vote = seam_vote(
             cloud.points, labels_iii, clusters_iii, seam_m=cfg.seam_vote_m,
-            angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness,
+            angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness, max_points=cfg.max_cells,
         )  # fmt: skip
         labels_iii, seams = vote.labels, vote.relabelled
         lap("seams")

@@ -12,9 +12,23 @@ from process.refine.seams import seam_vote
 
 CHAIR, PERSON, TABLE, CLUTTER = Label.CHAIR, Label.PERSON, Label.TABLE, Label.CLUTTER
 STEP = 0.01
-KW = {"seam_m": 0.08, "angle_deg": 15.0, "flatness": 0.06}
 
 Points = npt.NDArray[np.float64]
+
+
+def _vote(
+    points: Points,
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    *,
+    flatness: float = 0.06,
+    max_points: int = 400_000,
+) -> seams.SeamVote:
+    """The vote at the defaults of RefineConfig."""
+    return seam_vote(
+        points, labels, clusters, seam_m=0.08, angle_deg=15.0, flatness=flatness,
+        max_points=max_points,
+    )  # fmt: skip
 
 
 def _plate(x: tuple[float, float], y: tuple[float, float], z: float) -> Points:
@@ -57,7 +71,7 @@ def _seated() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], npt
 
 def test_a_person_label_bled_onto_a_seat_goes_back_to_the_chair() -> None:
     points, labels, clusters, bleed = _seated()
-    vote = seam_vote(points, labels, clusters, **KW)
+    vote = _vote(points, labels, clusters)
     back = bleed & (vote.labels == CHAIR)
     assert bleed.sum() > 300 and back.sum() > 0.7 * bleed.sum()
     # what stays is the crease: points whose neighbourhood reaches up the body's side
@@ -69,6 +83,15 @@ def test_a_person_label_bled_onto_a_seat_goes_back_to_the_chair() -> None:
     assert set(vote.relabelled.tolist()) == set(np.flatnonzero(back).tolist())
 
 
+def test_past_max_points_the_vote_runs_on_class_cells_with_the_same_verdict() -> None:
+    points, labels, clusters, bleed = _seated()
+    assert len(points) > 4000
+    vote = _vote(points, labels, clusters, max_points=3000)  # about 3 points a cell
+    back = bleed & (vote.labels == CHAIR)
+    assert back.sum() > 0.6 * bleed.sum()
+    assert np.all(vote.labels[~bleed] == labels[~bleed])
+
+
 def test_a_thin_object_lying_flat_on_a_desk_stays_itself() -> None:
     """A sheet on a desk shares the desk's surface, but all of its object lies on it."""
     desk = _plate((0.0, 1.2), (0.0, 0.6), 0.75)
@@ -76,7 +99,7 @@ def test_a_thin_object_lying_flat_on_a_desk_stays_itself() -> None:
     points = _noisy(desk + np.where(sheet, 0.002, 0.0)[:, None] * [0, 0, 1])
     labels = np.where(sheet, CLUTTER, TABLE).astype(np.uint8)
     clusters = np.where(sheet, 2, 1).astype(np.int32)
-    assert np.array_equal(seam_vote(points, labels, clusters, **KW).labels, labels)
+    assert np.array_equal(_vote(points, labels, clusters).labels, labels)
 
 
 def test_the_fringe_rule_is_what_keeps_the_sheet(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -85,7 +108,7 @@ def test_the_fringe_rule_is_what_keeps_the_sheet(monkeypatch: pytest.MonkeyPatch
     labels = np.where(sheet, CLUTTER, TABLE).astype(np.uint8)
     clusters = np.where(sheet, 2, 1).astype(np.int32)
     monkeypatch.setattr(seams, "FRINGE", 1.01)  # any share: the sheet would be desk
-    vote = seam_vote(_noisy(desk), labels, clusters, **KW)
+    vote = _vote(_noisy(desk), labels, clusters)
     assert np.mean(vote.labels[sheet] == TABLE) > 0.5  # all but its middle, beyond seam_m
 
 
@@ -107,17 +130,17 @@ def _arm_on_desk() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32]
 
 def test_an_arm_lying_on_a_desk_stays_the_persons() -> None:
     points, labels, clusters, _ = _arm_on_desk()
-    assert np.array_equal(seam_vote(points, labels, clusters, **KW).labels, labels)
+    assert np.array_equal(_vote(points, labels, clusters).labels, labels)
 
 
 def test_the_flatness_rule_is_what_keeps_the_arm() -> None:
     points, labels, clusters, n_desk = _arm_on_desk()
-    loose = seam_vote(points, labels, clusters, **{**KW, "flatness": 1.0 / 3.0})
+    loose = _vote(points, labels, clusters, flatness=1.0 / 3.0)
     assert np.any(loose.labels[n_desk:] == TABLE)  # a surface creeping round the arm's underside
 
 
 def test_one_class_or_none_changes_nothing() -> None:
     points = _noisy(_plate((0.0, 0.5), (0.0, 0.5), 0.0))
     for labels in (np.full(len(points), CHAIR), np.zeros(len(points))):
-        vote = seam_vote(points, labels.astype(np.uint8), np.ones(len(points), np.int32), **KW)
+        vote = _vote(points, labels.astype(np.uint8), np.ones(len(points), np.int32))
         assert np.array_equal(vote.labels, labels) and len(vote.relabelled) == 0
