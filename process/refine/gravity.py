@@ -28,6 +28,9 @@ _MAX_HINT_DEG = 65.0  # with network evidence: up lies within this of the hint
 _MIN_EVIDENCE = 0.05  # ... and at least this share of the planes' inliers carry structure labels
 _MIN_OBJECT_POINTS = 100  # without a hint, this many object-labelled points orient a table top
 _BOUNDARY_SHARE = 0.05  # a plane with at most this share of the points on a side bounds the room
+_AXIS_APART_DEG = 20.0  # plane normals this far apart are different axes of the room
+_LOPSIDED_RATIO = 2.0  # another axis is up when the objects are this many times as lopsided
+_LOPSIDED_MARGIN = 0.1  # ... and by this share of the room's extent more than on the largest's
 
 Found = list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]]  # (plane model, inliers)
 
@@ -44,7 +47,8 @@ def gravity(
 
     Sources: "labelled planes" (the network's structure labels chose among plane normals near
     the hint), "argument snapped to plane", "argument", "largest plane" (no hint), "largest
-    plane, objects below" (no hint, the plane has points on both sides) or "none".
+    plane, objects below" (no hint, the plane has points on both sides), "plane with the
+    objects at one end" (no hint, the largest plane is a wall: `_lopsided_axis`) or "none".
     """
     if up is not None:
         up = np.asarray(up, np.float64) / np.linalg.norm(up)
@@ -61,6 +65,10 @@ def gravity(
         return normal * np.sign(normal @ up), "argument snapped to plane"
     if not found:
         return None, "none"
+    if labels is not None:
+        lopsided = _lopsided_axis(points, found, labels)
+        if lopsided is not None:
+            return lopsided, "plane with the objects at one end"
     # no gravity given: the largest plane is taken as the floor, facing the bulk of the points
     model = max(found, key=lambda t: len(t[1]))[0]
     heights = points @ model[:3].astype(np.float32) + np.float32(model[3])
@@ -74,6 +82,44 @@ def gravity(
         return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane, objects below"
     side = np.median(heights)
     return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane"
+
+
+def _lopsided_axis(
+    points: npt.NDArray[np.float32], found: Found, labels: npt.NDArray[np.uint8]
+) -> npt.NDArray[np.float64] | None:
+    """Return up along another plane's normal when the largest plane is a wall, else None.
+
+    Furniture and people stand on the floor: along gravity the labelled objects lie at one end
+    of the room, along a wall's normal they line both walls. Lopsidedness is how far the
+    objects' median lies from the middle of the points' extent (1st-99th percentile), as a
+    share of it. When another axis is `_LOPSIDED_RATIO` times as lopsided as the largest
+    plane's, and by `_LOPSIDED_MARGIN` more, the largest plane is a wall (generator 4's living
+    rooms in a random frame: sofas and shelves against a long wall), and up leaves the objects.
+    """
+    objects = labels >= Label.TABLE
+    if int(objects.sum()) < _MIN_OBJECT_POINTS:
+        return None
+    apart = math.cos(math.radians(_AXIS_APART_DEG))
+    axes: list[npt.NDArray[np.float64]] = []
+    for model, _ in sorted(found, key=lambda t: -len(t[1])):
+        normal = np.asarray(model[:3], np.float64) / np.linalg.norm(model[:3])
+        if all(abs(float(normal @ axis)) < apart for axis in axes):
+            axes.append(normal)
+    if len(axes) < 2:
+        return None
+    sides = []
+    for axis in axes:
+        heights = points @ axis.astype(np.float32)
+        low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
+        sides.append(
+            ((low + high) / 2 - float(np.median(heights[objects]))) / max(high - low, 1e-9)
+        )
+    size = np.abs(sides)
+    best = int(np.argmax(size))
+    if best == 0 or size[best] < max(_LOPSIDED_RATIO * size[0], size[0] + _LOPSIDED_MARGIN):
+        return None
+    up: npt.NDArray[np.float64] = axes[best] * (1.0 if sides[best] > 0 else -1.0)
+    return up
 
 
 def _inside_the_room(heights: npt.NDArray[np.float32]) -> bool:

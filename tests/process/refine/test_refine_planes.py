@@ -224,3 +224,25 @@ def test_without_gravity_a_table_top_largest_plane_is_oriented_by_the_objects() 
     seg = segment_planes(points, CFG, up=None, labels=labels)
     assert seg.up_source == "largest plane, objects below"
     assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-6)
+
+
+def test_without_gravity_a_wall_largest_plane_gives_way_to_the_axis_the_objects_stand_on() -> None:
+    """A 6 x 2 m room seen along one long wall (6 x 2.6 m: the largest plane), with sofa
+    seats and tables along both long sides. Without labels the wall is taken for the floor;
+    with them, the objects lie at one end of the room's height and at neither end of its
+    width, and up leaves them (generator 4's living rooms in a random frame)."""
+    floor = grid_patch((0.0, 6.0), (0.0, 2.0), z=0.0)  # 30,000 points
+    wall = grid_patch((0.0, 6.0), (0.0, 2.6))[:, [0, 2, 1]]  # y = 0: 39,000, the largest
+    tops = [grid_patch((x, x + 0.8), (y, y + 0.5), z=z)
+            for x in (0.5, 2.5, 4.5) for y, z in ((0.1, 0.45), (1.4, 0.75))]  # fmt: skip
+    objects = np.concatenate(tops)
+    points = np.concatenate([floor, wall, objects]).astype(np.float32)
+    labels = np.r_[np.zeros(len(floor) + len(wall)), np.full(len(objects), Label.SOFA)]
+    unlabelled = segment_planes(points, CFG, up=None)
+    assert unlabelled.up_source == "largest plane" and unlabelled.up is not None
+    assert abs(unlabelled.up[1]) == pytest.approx(1.0, abs=1e-3)  # the wall's normal
+    seg = segment_planes(points, CFG, up=None, labels=labels.astype(np.uint8))
+    assert seg.up_source == "plane with the objects at one end"
+    assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-3)
+    assert np.mean(seg.labels[: len(floor)] == Label.FLOOR) > 0.97  # all but the wall's edge
+    assert np.mean(seg.labels[len(floor) : -len(objects)] == Label.WALL) > 0.98
