@@ -293,12 +293,12 @@ def refine(
             outputs.commit(staging, out, [staging / n for n in names])
         table = outputs.summary_table({"refinement": metrics}, title="semreplay process refine")
         Console().print(table)
-        if str(metrics.get("up_source", "")).startswith("largest plane"):
+        if cfg.refine.up is None and metrics.get("up") is not None:
             up = ", ".join(f"{v:.3f}" for v in metrics["up"])
             typer.echo(
-                f"gravity: none given, so up is the largest plane's normal [{up}]; if that plane"
-                " is not the floor (an object-heavy cloud in a SLAM frame), set [refine] up ="
-                " [x, y, z] in --config",
+                f"gravity: none given, so up [{up}] is a plane's normal ({metrics['up_source']});"
+                " if that plane is not the floor (an object-heavy cloud in a SLAM frame), set"
+                " [refine] up = [x, y, z] in --config",
                 err=True,
             )
         typer.echo(f"outputs in {out}: {outputs.MAP_REFINED}, {outputs.METRICS}, {outputs.CONFIG}")

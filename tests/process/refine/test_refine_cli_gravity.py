@@ -21,9 +21,11 @@ def test_without_gravity_the_command_names_the_up_it_took_and_the_setting(tmp_pa
     write_ply(cloud, scene.cloud)
     guessed = runner.invoke(app, ["refine", str(cloud), "--out", str(tmp_path / "a")])
     assert guessed.exit_code == 0, guessed.output
-    up = json.loads((tmp_path / "a" / outputs.METRICS).read_text())["refinement"]["up"]
+    section = json.loads((tmp_path / "a" / outputs.METRICS).read_text())["refinement"]
+    up = section["up"]
     note = next(line for line in guessed.output.splitlines() if line.startswith("gravity:"))
     assert f"[{up[0]:.3f}," in note and "set [refine] up = [x, y, z] in --config" in note
+    assert f"({section['up_source']})" in note  # how it was guessed
     config = tmp_path / "up.toml"
     config.write_text(f"[refine]\nup = [{', '.join(str(v) for v in scene.up)}]\n")
     given = runner.invoke(
