@@ -17,6 +17,8 @@ from process.cloud import read_cloud
 from process.errors import ReplayError
 from process.preview import render_top_view, up_vector
 
+TITLE_PX = 34  # height of the title band above each view
+
 
 def main(argv: list[str]) -> int:
     """Write the run folder's fused and refined maps side by side; 2 on bad arguments."""
@@ -33,7 +35,9 @@ def main(argv: list[str]) -> int:
     up = up_vector(refined.points, refined.labels, None)
     views = []
     for title, cloud in (("phase I: fused", fused), ("phase III: refined", refined)):
-        image = np.ascontiguousarray(render_top_view(cloud.points, cloud.labels, up=up))
+        view = render_top_view(cloud.points, cloud.labels, up=up)
+        white = (255, 255, 255)  # the title in a band of its own, not over the map
+        image = cv2.copyMakeBorder(view, TITLE_PX, 0, 0, 0, cv2.BORDER_CONSTANT, value=white)
         cv2.putText(image, title, (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 2)
         views.append(image)
     cv2.imwrite(str(out), np.hstack(views)[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
