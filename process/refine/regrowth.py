@@ -112,7 +112,11 @@ def regrow(
     table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m)
     hosts = _hosts(table, patch_max_m) if nest else np.zeros((len(ids), len(ids)), bool)
     nested = np.asarray(hosts.any(axis=1), bool)
-    adopted = _adopt(table, hosts, points, clusters, ids, adopt_ratio) if nested.any() else []
+    adopted = (
+        _adopt(table, hosts, points, clusters, ids, adopt_ratio, upright=up is not None)
+        if nested.any()
+        else []
+    )
     host_of = dict(adopted)
     for nested_row, host in adopted:
         for _ in range(len(host_of)):  # a host adopted in turn passes on its own host's class
@@ -298,6 +302,8 @@ def _adopt(
     clusters: npt.NDArray[np.int32],
     ids: npt.NDArray[np.int32],
     ratio: float,
+    *,
+    upright: bool = False,
 ) -> list[tuple[int, int]]:
     """Return (nested row, host row) for nested clusters on a host object that outweighs them.
 
@@ -306,8 +312,9 @@ def _adopt(
     in the person's box and is outweighed, but only 2-89 % of its points are near the person
     (generator 3: adoption alone turned 13,600 chair points into person in one room). The
     host must outweigh the cluster's own object, not the cluster alone, unless it is a table's
-    (table objects chain over gaps to the table patches on chairs beside them): a chair's leg
-    beside a box on the floor is part of a chair larger than the box.
+    (table objects chain over gaps to the table patches on chairs beside them) and, with
+    `upright` (z along up), not taller than wide: a chair's leg beside a box on the floor is
+    part of a chair larger than the box, a table's leg beside a chair part of the table.
     """
     if ratio <= 0:
         return []
@@ -319,8 +326,13 @@ def _adopt(
         host = int(candidates[np.argmax(per_object[table.object[candidates]])])
         # a part of a larger object of its own class is that object's, not a patch on the
         # host (a chair's leg beside a box); a table's object chains over gaps to the
-        # table-labelled patches on chairs beside it, so a table cluster is weighed alone
-        own = sizes[row] if table.label[row] == Label.TABLE else per_object[table.object[row]]
+        # table-labelled patches on chairs beside it, so a table cluster is weighed alone,
+        # unless it is taller than wide: a piece of a leg (generator 4's kitchen at 500k:
+        # chairs pushed in took 5,640 points of the table's legs)
+        extent = table.own_high[row] - table.own_low[row]
+        leg = upright and extent[2] > max(extent[0], extent[1])  # taller than wide
+        alone = table.label[row] == Label.TABLE and not leg
+        own = sizes[row] if alone else per_object[table.object[row]]
         if per_object[table.object[host]] < ratio * own:
             continue
         host_points = points[np.isin(clusters, ids[table.object == table.object[host]])]

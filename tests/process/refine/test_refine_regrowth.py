@@ -341,3 +341,33 @@ def test_a_chair_under_a_seated_person_is_an_object_not_a_patch() -> None:
     own = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, patch_max_m=0.7, **kw)  # type: ignore[arg-type]
     assert (patch.labels[: len(chair)] == 6).mean() > 0.9  # as a patch: the person's
     assert (own.labels[: len(chair)] == 5).all()  # an object: a chair, its hole refilled
+
+
+def test_a_piece_of_a_table_leg_beside_a_chair_stays_the_tables() -> None:
+    """A chair pushed in beside a table's leg: the leg's lower piece (a cluster of its own, the
+    network missed its middle) lies in the chair's box, on the chair and outweighed by it, but
+    it is taller than wide, part of the table: it stays table. A flat table-labelled patch on
+    the seat is a patch: the chair adopts it."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.75)
+    leg_top = grid_patch((0.0, 0.04), (0.45, 0.73))[:, [0, 2, 1]] + (0.4, 0.78, 0.0)
+    leg_low = grid_patch((0.0, 0.04), (0.05, 0.37))[:, [0, 2, 1]] + (0.4, 0.78, 0.0)
+    seat = grid_patch((0.3, 0.7), (0.82, 1.22), z=0.45)
+    back = grid_patch((0.3, 0.7), (0.45, 0.95))[:, [0, 2, 1]] + (0.0, 1.22, 0.0)
+    chair_legs = [
+        grid_patch((0.0, 0.04), (0.05, 0.43))[:, [0, 2, 1]] + (x, y, 0.0)
+        for x in (0.3, 0.66) for y in (0.84, 1.2)
+    ]  # fmt: skip
+    patch = np.linalg.norm(seat[:, :2] - (0.55, 1.05), axis=1) < 0.07
+    chair = np.concatenate([seat, back, *chair_legs])
+    points = np.concatenate([top, leg_top, leg_low, chair]).astype(np.float32)
+    n_table = len(top) + len(leg_top)
+    labels = np.r_[np.full(n_table + len(leg_low), 4), np.full(len(chair), 5)].astype(np.uint8)
+    clusters = np.r_[np.full(n_table, 1), np.full(len(leg_low), 2), np.full(len(chair), 3)]
+    on_seat = n_table + len(leg_low) + np.flatnonzero(patch)
+    labels[on_seat], clusters[on_seat] = 4, 4
+    assert len(chair) >= 3 * len(leg_low) and n_table > len(chair) / 3
+    kw = {"r1_m": {4: 0.07, 5: 0.07}, "prior": labels, "nest": True, "adopt_ratio": 3.0,
+          "patch_max_m": 0.7, "gap_m": 0.15}  # fmt: skip
+    grown = regrow(points, labels, clusters.astype(np.int32), up=np.array([0.0, 0.0, 1.0]), **kw)  # type: ignore[arg-type]
+    assert (grown.labels[n_table : n_table + len(leg_low)] == 4).all()  # the leg: table
+    assert (grown.labels[on_seat] == 5).all()  # the flat patch: the chair's
