@@ -77,8 +77,7 @@ def gravity(
         # not a floor but a large table top (generator 4's object-heavy kitchen, in a random
         # frame): furniture and people fill the lower part of the room, so up faces away from
         # the end nearer the objects' median
-        low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
-        side = (low + high) / 2 - float(np.median(objects))
+        side = _lopsidedness(heights, objects)
         return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane, objects below"
     side = np.median(heights)
     return model[:3] * (1.0 if side >= 0 else -1.0), "largest plane"
@@ -90,11 +89,10 @@ def _lopsided_axis(
     """Return up along another plane's normal when the largest plane is a wall, else None.
 
     Furniture and people stand on the floor: along gravity the labelled objects lie at one end
-    of the room, along a wall's normal they line both walls. Lopsidedness is how far the
-    objects' median lies from the middle of the points' extent (1st-99th percentile), as a
-    share of it. When another axis is `_LOPSIDED_RATIO` times as lopsided as the largest
-    plane's, and by `_LOPSIDED_MARGIN` more, the largest plane is a wall (generator 4's living
-    rooms in a random frame: sofas and shelves against a long wall), and up leaves the objects.
+    of the room, along a wall's normal they line both walls (`_lopsidedness`). When another
+    axis is `_LOPSIDED_RATIO` times as lopsided as the largest plane's, and by
+    `_LOPSIDED_MARGIN` more, the largest plane is a wall (generator 4's living rooms in a
+    random frame: sofas and shelves against a long wall), and up leaves the objects.
     """
     objects = labels >= Label.TABLE
     if int(objects.sum()) < _MIN_OBJECT_POINTS:
@@ -110,16 +108,22 @@ def _lopsided_axis(
     sides = []
     for axis in axes:
         heights = points @ axis.astype(np.float32)
-        low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
-        sides.append(
-            ((low + high) / 2 - float(np.median(heights[objects]))) / max(high - low, 1e-9)
-        )
+        sides.append(_lopsidedness(heights, heights[objects]))
     size = np.abs(sides)
     best = int(np.argmax(size))
     if best == 0 or size[best] < max(_LOPSIDED_RATIO * size[0], size[0] + _LOPSIDED_MARGIN):
         return None
     up: npt.NDArray[np.float64] = axes[best] * (1.0 if sides[best] > 0 else -1.0)
     return up
+
+
+def _lopsidedness(heights: npt.NDArray[np.float32], objects: npt.NDArray[np.float32]) -> float:
+    """Return how far the objects' median lies below the middle of the heights' extent.
+
+    The extent: 1st-99th percentile of all heights; the result a share of it (< 0: above).
+    """
+    low, high = (float(v) for v in np.percentile(heights, [1.0, 99.0]))
+    return ((low + high) / 2 - float(np.median(objects))) / max(high - low, 1e-9)
 
 
 def _inside_the_room(heights: npt.NDArray[np.float32]) -> bool:

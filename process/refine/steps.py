@@ -103,9 +103,8 @@ class RefineResult:
 
     def seam_cloud(self) -> LabelledCloud:
         """Return the points the seam vote relabelled, with their new class."""
-        return self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii).select(
-            self.seams
-        )
+        cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
+        return cloud.select(self.seams)
 
     def regrown_cloud(self) -> LabelledCloud:
         """Return the points regrowth labelled, with their new class and cluster."""
