@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import LABEL_NAMES, NUM_LABELS, RecordingReader
+from process.errors import ReplayError
 from process.evaluate import confusion_iou, confusion_matrix, confusion_miou
 from process.segmentation import SegmentationConfig, Segmenter
 from process.segmentation.models import SHIPPED, ModelChoice, shipped
@@ -145,11 +146,7 @@ def measure(
         seg = Segmenter(cfg, choice=choice, device="cpu")
         seg.warm_up()
         load_s = time.perf_counter() - t0
-        times, labels = [], []
-        for image in real or [sim[0][0]]:
-            t0 = time.perf_counter()
-            labels.append(seg.segment(image).labels)
-            times.append(time.perf_counter() - t0)
+        ms, labels = _timed(seg, real or [sim[0][0]])
         if name == TEACHER:
             teacher = labels
         agreement = (
@@ -162,7 +159,6 @@ def measure(
         for color, gt in sim:
             cm += confusion_matrix(seg.segment(color).labels, gt)
         iou = confusion_iou(cm)
-        ms = 1000 * statistics.median(times)
         out.append(ModelFigures(name, ms, load_s, agreement, confusion_miou(cm), iou, half))
     return out
 
@@ -172,12 +168,19 @@ def steady_ms(name: str, *, threads: int) -> float:
     cfg = SegmentationConfig(threads=threads)
     seg = Segmenter(cfg, choice=shipped(name, "benchmark", cfg), device="cpu")
     seg.warm_up()
-    times = []
-    for image in real_frames() or [np.full((480, 640, 3), 128, np.uint8)] * 5:
+    return _timed(seg, real_frames() or [np.full((480, 640, 3), 128, np.uint8)] * 5)[0]
+
+
+def _timed(
+    seg: Segmenter, images: list[npt.NDArray[np.uint8]]
+) -> tuple[float, list[npt.NDArray[np.uint8]]]:
+    """Return the median ms per image of `seg.segment` and the labels it gave."""
+    times, labels = [], []
+    for image in images:
         t0 = time.perf_counter()
-        seg.segment(image)
+        labels.append(seg.segment(image).labels)
         times.append(time.perf_counter() - t0)
-    return 1000 * statistics.median(times)
+    return 1000 * statistics.median(times), labels
 
 
 def _half_size_agreement(
@@ -196,8 +199,13 @@ def _half_size_agreement(
 
 
 def main(argv: list[str]) -> int:
-    """Print each model's figures (argv: more checkpoints to measure)."""
-    for f in measure(checkpoints=tuple(Path(a) for a in argv)):
+    """Print each model's figures (argv: more checkpoints to measure); 2 on a bad checkpoint."""
+    try:
+        figures = measure(checkpoints=tuple(Path(a) for a in argv))
+    except (ReplayError, ValueError) as err:
+        print(f"seg_models: {err}", file=sys.stderr)
+        return 2
+    for f in figures:
         agree = "n/a" if f.agreement is None else f"{f.agreement:.3f}"
         per = ", ".join(f"{LABEL_NAMES[k]} {v:.2f}" for k, v in f.iou.items())
         half = (

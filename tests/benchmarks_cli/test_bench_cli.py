@@ -50,3 +50,17 @@ def test_map_pictures_titles_each_view_above_the_map(tmp_path: Path) -> None:
     grey = (band.max(axis=1) - band.min(axis=1)) < 8  # white paper, black text, antialiasing
     assert grey.all() and (band < 60).all(axis=1).any()  # some title text, no map colour
     assert (image[TITLE_PX:] != 255).any(axis=2).any()  # the maps below
+
+
+@pytest.mark.parametrize("content", [None, b"not a checkpoint"])
+def test_seg_models_refuses_a_bad_checkpoint_in_one_line(
+    content: bytes | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from benchmarks.seg_models import main as seg_models_main
+
+    checkpoint = tmp_path / "student.safetensors"
+    if content is not None:
+        checkpoint.write_bytes(content)
+    assert seg_models_main([str(checkpoint)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("seg_models:") and "student" in err
