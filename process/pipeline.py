@@ -5,6 +5,12 @@ segments and fuses them, and every logging call goes to a thread that encodes an
 `.rrd` (process.streaming, viz.background); bounded queues keep memory flat. Keyframes are fused
 at their pose when tracked; if loop closures later move them, the map is fused again at the
 final poses from the keyframes the fusion kept on disk (process.fusion.keyframes).
+
+Two runs of one recording with one config write the same maps, trajectory and metrics (but
+timings), bit for bit: keyframes are chosen on the frame loop's thread and fused in their order,
+whatever the threads' timing; the dense odometry sums on one thread (process.odometry.dense) and
+the TSDF's points come out sorted (process.fusion.tsdf). Following a live capture is the
+exception: which frames and keyframes are left out to keep up depends on the clock.
 """
 
 from __future__ import annotations

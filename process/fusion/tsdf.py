@@ -74,4 +74,14 @@ class TsdfSurface:
             cloud = self._grid.extract_point_cloud(weight_threshold=min_views - 0.5)
         except RuntimeError:  # Open3D raises when no voxel reaches the weight: no surface yet
             return np.zeros((0, 3), np.float32)
-        return np.asarray(cloud.point.positions.numpy(), np.float32).reshape(-1, 3)
+        return canonical_order(np.asarray(cloud.point.positions.numpy(), np.float32).reshape(-1, 3))
+
+
+def canonical_order(points: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """Return the (N, 3) points sorted by x, then y, then z: an order set by their values alone.
+
+    Open3D extracts the surface from its hash map on parallel threads, so the same surface
+    comes out in a different order from run to run (the points themselves are identical), and
+    refinement samples points by index: sorted, the same surface gives the same refined map.
+    """
+    return np.ascontiguousarray(points[np.lexsort((points[:, 2], points[:, 1], points[:, 0]))])

@@ -11,6 +11,8 @@ is smooth, hybrid elsewhere.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -128,22 +130,41 @@ class DenseAligner:
             exact = max(source.roughness, target.roughness) <= _MAX_ROUGHNESS
             method = "point_to_plane" if well_posed and exact else "hybrid"
         try:
-            result = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
-                source.rgbd,
-                target.rgbd,
-                self.camera_matrix,
-                o3d.core.Tensor.from_numpy(np.array(init_target_from_source, np.float64)),
-                1.0,
-                self.max_depth_m,
-                self.quick_criteria if quick else self.criteria,
-                _METHODS[method],
-            )
+            with one_thread():  # see one_thread: Open3D's parallel sums vary in the last bits
+                result = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
+                    source.rgbd,
+                    target.rgbd,
+                    self.camera_matrix,
+                    o3d.core.Tensor.from_numpy(np.array(init_target_from_source, np.float64)),
+                    1.0,
+                    self.max_depth_m,
+                    self.quick_criteria if quick else self.criteria,
+                    _METHODS[method],
+                )
         except RuntimeError:
             return None  # Open3D raises when too few pixels correspond
         transform = np.asarray(result.transformation.numpy(), np.float64)
         if not np.all(np.isfinite(transform)):
             return None
         return DenseResult(transform, float(result.fitness), method)
+
+
+@contextmanager
+def one_thread() -> Iterator[None]:
+    """Run Open3D on the calling thread alone for the duration (its limit is process-wide).
+
+    Open3D's RGB-D odometry sums its normal equations in float32 on parallel threads, and how
+    the range is split among them depends on the scheduling: the same two images gave poses
+    3e-6 apart from one call to the next, which made two runs of a recording differ. On one
+    thread the sums, and the poses, follow the inputs alone. Threads that are in Open3D calls
+    meanwhile (the fusion's TSDF) run on without helpers until the limit is restored.
+    """
+    threads = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        yield
+    finally:
+        o3d.utility.set_max_threads(threads)
 
 
 def normal_conditioning(
