@@ -27,7 +27,9 @@ class RefineConfig:
     plane_local_hypotheses: int = 300  # ... and this many planes of random points' neighbours
     # compete with RANSAC's (plane_grid.local_plane: finds walls of a few % of the points); 0: off
     plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
-    max_planes: int = 8  # planes tried at most, structural or not
+    max_planes: int = 8  # planes tried at most, structural or not ...
+    structure_planes: int = 8  # ... then up to this many more, kept only as walls, floors or
+    # ceilings (generator 4: desks, seats and sofas use up the 8 and walls were left out)
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
@@ -137,6 +139,7 @@ class RefineConfig:
             "plane_local_hypotheses": (self.plane_local_hypotheses, 0, 100_000),
             "plane_sample_points": (self.plane_sample_points, 0, 10**9),
             "max_planes": (self.max_planes, 0, 100),
+            "structure_planes": (self.structure_planes, 0, 100),
             "horizontal_tolerance_deg": (self.horizontal_tolerance_deg, 0.0, 45.0),
             "structure_height_tol_m": (self.structure_height_tol_m, 0.0, 10.0),
             "wall_min_height_m": (self.wall_min_height_m, 0.0, 100.0),

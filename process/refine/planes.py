@@ -95,7 +95,7 @@ def segment_planes(
     remaining = np.arange(len(points))
     found: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]] = []
     while (
-        len(found) < cfg.max_planes
+        len(found) < cfg.max_planes + cfg.structure_planes
         and len(remaining) > cfg.plane_max_remaining
         and len(remaining) >= min_points
     ):
@@ -112,6 +112,9 @@ def segment_planes(
     planes = tuple(
         _classify(points, m, idx, heights, up_used, cfg, min_points, labels) for m, idx in found
     )
+    # past max_planes only structure counts: in a furnished room desk, seat and sofa tops use up
+    # the first planes, and a wall found later would otherwise be left to regrowth
+    planes = planes[: cfg.max_planes] + tuple(p for p in planes[cfg.max_planes :] if p.label)
     planes = furniture_fronts(points, heights, planes, cfg)
     planes = tighten_bands(points, objects_on_walls(points, planes, cfg), cfg)
     planes, table = table_surfaces(points, planes, up_used, labels, cfg, density)

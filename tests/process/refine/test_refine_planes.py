@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from helpers_refine import grid_patch
@@ -246,3 +248,34 @@ def test_without_gravity_a_wall_largest_plane_gives_way_to_the_axis_the_objects_
     assert seg.up is not None and seg.up @ UP == pytest.approx(1.0, abs=1e-3)
     assert np.mean(seg.labels[: len(floor)] == Label.FLOOR) > 0.97  # all but the wall's edge
     assert np.mean(seg.labels[len(floor) : -len(objects)] == Label.WALL) > 0.98
+
+
+def _furnished_room() -> tuple[np.ndarray, dict[str, slice]]:
+    """The room's floor and wall, a desk top larger than a second wall, and a smaller shelf."""
+    floor = grid_patch((0.0, 3.0), (0.0, 2.0), z=0.5)  # 15,000 points
+    wall = grid_patch((0.0, 2.0), (0.56, 2.9), z=0.0)[:, [0, 2, 1]]  # 11,700, at y = 2.1
+    wall[:, 1] = 2.1
+    desk = grid_patch((0.5, 2.5), (0.3, 1.3), z=1.25)  # 5,000: the third plane
+    side = grid_patch((0.1, 1.3), (0.56, 2.9), z=0.0, step=0.03)[:, [2, 0, 1]]  # 3,160, x = 0
+    shelf = grid_patch((1.0, 2.0), (1.4, 1.9), z=1.9)  # 1,250 + 1,250: level, below the wall
+    shelf = np.concatenate([shelf, shelf + np.array([0.0, 0.0, 0.3], np.float32)])
+    parts = [floor, wall, desk, side, shelf]
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    names = ("floor", "wall", "desk", "side", "shelf")
+    return np.concatenate(parts), {
+        n: slice(a, b) for n, a, b in zip(names, bounds[:-1], bounds[1:], strict=True)
+    }
+
+
+def test_past_max_planes_the_search_keeps_walls_only() -> None:
+    points, parts = _furnished_room()
+    cfg = dataclasses.replace(CFG, plane_min_points=1000, max_planes=3)
+    capped = segment_planes(points, dataclasses.replace(cfg, structure_planes=0), up=UP)
+    assert (capped.labels[parts["side"]] == 0).all()  # the desk used up the third plane
+
+    seg = segment_planes(points, cfg, up=UP)
+    assert (seg.labels[parts["side"]] == Label.WALL).mean() > 0.98  # a row is the desk's
+    assert (seg.labels[parts["wall"]] == Label.WALL).all()
+    # the shelves come after the side wall, and are no structure: they are not kept as planes
+    assert len(seg.planes) == 4
+    assert not seg.structural[parts["shelf"]].any()
