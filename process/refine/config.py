@@ -48,7 +48,12 @@ class RefineConfig:
     table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
     table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
     # points become table (on TUM fr1_rpy the networks call the desk wall and clutter)
-    table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift)
+    table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift);
+    # a piece labelled an object class on less than this share of its points ...
+    table_min_object_share: float = 0.1
+    # ... over this many times its points unlabelled under it is a cabinet's or counter's top
+    # (generator 5: bare kitchen counters became table, F1 0.81 -> 0.66; surfaces.py)
+    table_solid_ratio: float = 1.5
     table_other_cell_m: float = 0.2  # ... but cells this wide labelled more chair, person,
     # plant or sofa than desk stay out of it (0: none; surfaces.py)
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
@@ -170,6 +175,8 @@ class RefineConfig:
             "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
+            "table_min_object_share": (self.table_min_object_share, 0.0, 1.0),
+            "table_solid_ratio": (self.table_solid_ratio, 0.0, 1000.0),
             "table_other_cell_m": (self.table_other_cell_m, 0.0, 10.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
