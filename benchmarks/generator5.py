@@ -12,7 +12,9 @@ orientation; `up` says where up is.
 
 SIZES holds the voxel size per room for about 60k, 200k and 500k object points (the living room's
 sofas and the meeting room's big table make those rooms twice as full); the 500k size uses the
-DENSE camera (640 x 360, 100 views).
+DENSE camera (640 x 360, 100 views). Measured on seeds 0-7 (0-3 for 500k): 42k-68k object points
+of 0.25M-0.64M, 187k-245k of 0.96M-1.45M, 495k-540k of 2.4M-3.7M; voxels hit once are dropped.
+Phase-I object F1 (process.evaluate.label_metrics) lands at 0.65-0.82.
 
     python -m benchmarks.generator5 SEED [VOXEL_M | 60k | 200k | 500k]
 """
@@ -87,7 +89,7 @@ def gen5_scene(
 
     Args:
         seed: seeds the layout, the walk, the depth noise, the network and the orientation.
-        voxel_m: fusion voxel size in metres (0.005-0.03; see VOXEL_60K...VOXEL_500K).
+        voxel_m: fusion voxel size in metres (0.005-0.03; see SIZES).
         room: one of ROOMS.
         camera: views, image size and depth noise; Camera() by default.
         errors: the network's error rates; Gen5Errors() by default, Gen5Errors.none() for none.
@@ -149,10 +151,10 @@ class Caster:
         self.instances = np.array([p.instance for p in parts] + [0], np.int32)
         self.colors = np.array([p.color for p in parts] + [(0, 0, 0)]) * 255.0
 
-    def clearance(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Return each point's distance (M,) to the nearest surface."""
-        query = o3d.core.Tensor.from_numpy(np.asarray(points, np.float32))
-        return np.asarray(self.scene.compute_distance(query).numpy(), np.float64)
+    def clearance(self, point: npt.NDArray[np.float64]) -> float:
+        """Return the point's (3,) distance to the nearest surface."""
+        query = o3d.core.Tensor.from_numpy(np.asarray(point[None], np.float32))
+        return float(self.scene.compute_distance(query).numpy()[0])
 
     def render(self, world_from_camera: npt.NDArray[np.float64], cam: Camera) -> View:
         """Cast one ray per pixel centre (camera z = 1, so the hit distance is z-depth)."""
@@ -191,7 +193,7 @@ def walk(
         for tries in range(30):  # keep out of people, plants and shelves
             xy = a + (b - a) * (t % 1) + rng.normal(0, 0.25 / (1 + tries // 10), 2)
             eye = np.array([*xy, rng.uniform(1.2, 1.7)])
-            if caster.clearance(eye[None])[0] > 0.35:
+            if caster.clearance(eye) > 0.35:
                 break
         to_centre = np.array([room.w / 2, room.d / 2]) - xy
         yaw = np.arctan2(to_centre[1], to_centre[0]) + rng.uniform(-1.4, 1.4)
@@ -305,42 +307,31 @@ def report(scene: Gen5Scene) -> None:
     from process.evaluate import label_metrics
 
     n_obj = int(np.isin(scene.truth, OBJECT_LABELS).sum())
-    up = np.round(scene.up, 3)
-    print(f"room {scene.room}: {len(scene.cloud):,} points, {n_obj:,} on objects, up {up}")
+    print(f"room {scene.room}: {len(scene.cloud):,} points, {n_obj:,} on objects, up {scene.up}")
     metrics = label_metrics(scene.cloud.labels, scene.truth)
-    for label in range(NUM_LABELS):
-        n_truth = int((scene.truth == label).sum())
-        n_label = int((scene.cloud.labels == label).sum())
-        if not n_truth and not n_label:
-            continue
-        row = f"  {LABEL_NAMES[label]:<14} truth {n_truth:>9,}  phase I {n_label:>9,}"
-        if LABEL_NAMES[label] in metrics and label in OBJECT_LABELS:
-            m = metrics[LABEL_NAMES[label]]
-            row += f"  P {m['precision']:.3f}  R {m['recall']:.3f}"
-        print(row)
+    for label, name in enumerate(LABEL_NAMES):
+        counts = [int((scene.truth == label).sum()), int((scene.cloud.labels == label).sum())]
+        m = metrics.get(name) if label in OBJECT_LABELS else None
+        pr = f"  P {m['precision']:.3f}  R {m['recall']:.3f}" if m else ""
+        if any(counts):
+            print(f"  {name:<14} truth {counts[0]:>9,}  phase I {counts[1]:>9,}{pr}")
     m = metrics["all"]
     print(f"  objects: F1 {m['f1']:.3f}  P {m['precision']:.3f}  R {m['recall']:.3f}")
 
 
 def main(argv: list[str]) -> int:
     """Generate one scene and print its counts, per-class phase-I precision, recall and time."""
+    start = time.perf_counter()
     try:
-        seed = int(argv[0]) if argv else 0
-        size = argv[1] if len(argv) > 1 else "200k"
-        start = time.perf_counter()
-        if size in SIZES:
-            scene = sized_scene(seed, size)
-        else:
-            scene = gen5_scene(seed=seed, voxel_m=float(size))
+        seed, size = int(argv[0]) if argv else 0, argv[1] if len(argv) > 1 else "200k"
+        sized = size in SIZES
+        scene = sized_scene(seed, size) if sized else gen5_scene(seed=seed, voxel_m=float(size))
     except ValueError as err:
-        print(
-            f"usage: python -m benchmarks.generator5 [SEED] [VOXEL_M|60k|200k|500k]: {err}",
-            file=sys.stderr,
-        )
+        usage = "usage: python -m benchmarks.generator5 [SEED] [VOXEL_M|60k|200k|500k]"
+        print(f"{usage}: {err}", file=sys.stderr)
         return 2
-    seconds = time.perf_counter() - start
     report(scene)
-    print(f"  generated in {seconds:.1f} s")
+    print(f"  generated in {time.perf_counter() - start:.1f} s")
     return 0
 
 
