@@ -306,8 +306,8 @@ def report(scene: Gen5Scene) -> None:
     """Print counts and per-class phase-I precision and recall."""
     from process.evaluate import label_metrics
 
-    n_obj = int(np.isin(scene.truth, OBJECT_LABELS).sum())
-    print(f"room {scene.room}: {len(scene.cloud):,} points, {n_obj:,} on objects, up {scene.up}")
+    n_obj, up = int(np.isin(scene.truth, OBJECT_LABELS).sum()), np.round(scene.up, 3)
+    print(f"room {scene.room}: {len(scene.cloud):,} points, {n_obj:,} on objects, up {up}")
     metrics = label_metrics(scene.cloud.labels, scene.truth)
     for label, name in enumerate(LABEL_NAMES):
         counts = [int((scene.truth == label).sum()), int((scene.cloud.labels == label).sum())]
