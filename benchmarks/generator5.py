@@ -178,15 +178,9 @@ def walk(
     room: Room, caster: Caster, rng: np.random.Generator, n: int
 ) -> list[npt.NDArray[np.float64]]:
     """Return `n` world_from_camera poses of someone walking round the room, looking around."""
-    inset = min(1.1, room.w / 3, room.d / 3)
-    corners = np.array(
-        [
-            [inset, inset],
-            [room.w - inset, inset],
-            [room.w - inset, room.d - inset],
-            [inset, room.d - inset],
-        ]
-    )
+    lo = min(1.1, room.w / 3, room.d / 3)
+    hi_x, hi_y = room.w - lo, room.d - lo
+    corners = np.array([[lo, lo], [hi_x, lo], [hi_x, hi_y], [lo, hi_y]])
     poses = []
     for t in np.linspace(0, 4, n, endpoint=False) + rng.uniform(0, 4 / max(n, 1)):
         a, b = corners[int(t) % 4], corners[(int(t) + 1) % 4]

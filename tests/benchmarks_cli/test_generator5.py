@@ -55,6 +55,7 @@ def test_up_is_the_rooms_up_and_the_floor_lies_flat(scene: Gen5Scene) -> None:
     floor, ceiling = height[scene.truth == Label.FLOOR], height[scene.truth == Label.CEILING]
     assert abs(float(np.linalg.norm(scene.up)) - 1.0) < 1e-9
     assert np.ptp(np.percentile(floor, [1, 99])) < 0.03  # flat, across the whole room
+    assert np.abs(floor - np.median(floor)).max() < 0.1  # depth noise at 4 m is 2.4 cm
     assert 2.45 < np.median(ceiling) - np.median(floor) < 2.95  # gen4 rooms are 2.5-2.9 m high
     table = height[scene.truth == Label.TABLE] - np.median(floor)
     assert 0.7 < np.percentile(table, 95) < 0.8  # desk tops at 0.74 m
@@ -154,6 +155,24 @@ def test_confusion_alone_relabels_whole_segments_plausibly(
             assert (pred[mask] == label).all() and label in WRONG_CLASS[truth]
             confused += 1
     assert confused >= 3
+
+
+def test_a_consistently_confused_object_is_confused_in_most_views(
+    views: tuple[list[View], list[bool]],
+) -> None:
+    room = build_room("office", np.random.default_rng(7))
+    network = Network(room.parts, Gen5Errors().only("confusion"), np.random.default_rng(0))
+    always = {i: t.wrong for i, t in network.traits.items() if t.wrong}
+    assert always  # at least one object
+    rng, seen, confused = np.random.default_rng(1), 0, 0
+    for view in views[0]:
+        pred = network.predict(view, rng)
+        for inst, wrong in always.items():
+            mask = view.instances == inst
+            if mask.sum() > 50:
+                seen += 1
+                confused += int((pred[mask] == wrong).all())
+    assert seen >= 3 and confused >= 0.6 * seen  # confusion_always = 0.8
 
 
 def test_speckle_alone_stays_near_outlines(views: tuple[list[View], list[bool]]) -> None:
