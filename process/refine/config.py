@@ -67,7 +67,10 @@ class RefineConfig:
     min_cluster_area_m2: float = 0.01  # ... or smaller than this surface at the class's density
     full_curves: bool = False  # run DBSCAN for every K, not only until the stable run ends
     regrowth: bool = True  # recover unlabelled points around each cluster
-    object_gap_m: float = 0.15  # regrowth: same-class clusters this close are one object
+    object_gap_m: float = 0.15  # regrowth: same-class clusters this close are one object, and
+    # up to this far apart when a wrong-class patch touches both (a sofa's seat called chair
+    # between its back and front: a fused simulated map gained 0.049; objects.py); 0: off
+    object_bridge_m: float = 0.5
     sparse_clusters_yield: bool = True  # a cluster sparse at the paper's MinPts goes to 0
     # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
@@ -124,6 +127,7 @@ class RefineConfig:
             "rejoin_own_class": False,
             "tabletop_objects": False,
             "seam_vote_m": 0.0,
+            "object_bridge_m": 0.0,
             "regrow_structure": True,
         }
         return cls(**{**paper, **overrides})
@@ -149,6 +153,7 @@ class RefineConfig:
             "k_max": (self.k_max, 3, 1000),
             "min_cluster_points": (self.min_cluster_points, 1, 10**9),
             "object_gap_m": (self.object_gap_m, 0.0, 10.0),
+            "object_bridge_m": (self.object_bridge_m, 0.0, 10.0),
             "nested_adopt_ratio": (self.nested_adopt_ratio, 0.0, 10**6),
             "nested_patch_max_m": (self.nested_patch_max_m, 0.0, 10**3),
             "table_top_m": (self.table_top_m, 0.0, 1.0),

@@ -21,6 +21,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
+from process.refine.objects import group_objects
 
 _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, nearest first
 ON_HOST_SHARE = 0.95  # of a nested cluster's points near its host's for adoption (_adopt)
@@ -53,6 +54,7 @@ def regrow(
     *,
     r1_m: dict[int, float],
     gap_m: float = 0.0,
+    bridge_m: float = 0.0,
     up: npt.NDArray[np.float64] | None = None,
     prior: npt.NDArray[np.uint8] | None = None,
     keep_out: npt.NDArray[np.bool_] | None = None,
@@ -70,6 +72,8 @@ def regrow(
         clusters: (N,) cluster id per point, 0 = none; every cluster has one class.
         r1_m: class label -> r1 (the class's chosen eps).
         gap_m: clusters of one class whose boxes come this close are one object.
+        bridge_m: ... and up to this far apart when a patch of another class (a box of at
+            most `patch_max_m` diagonal) touches both (objects.py); 0: off.
         up: gravity-up; boxes are then taken in a frame with z up, and the box of each
             object of a class that stands on the floor (STANDING) reaches down to it (the
             lowest points): furniture stands on legs, bases and stems that a segmentation
@@ -109,7 +113,7 @@ def regrow(
     ids = np.unique(clusters[clusters > 0])
     if len(ids) == 0:
         return Regrowth(labels, clusters, np.zeros(0, np.intp), {}, {}, 0)
-    table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m)
+    table = _cluster_table(points, labels, clusters, ids, r1_m, gap_m, bridge_m, patch_max_m)
     hosts = _hosts(table, patch_max_m) if nest else np.zeros((len(ids), len(ids)), bool)
     nested = np.asarray(hosts.any(axis=1), bool)
     adopted = (
@@ -227,6 +231,8 @@ def _cluster_table(
     ids: npt.NDArray[np.int32],
     r1_m: dict[int, float],
     gap_m: float,
+    bridge_m: float = 0.0,
+    patch_max_m: float = 0.0,
 ) -> _Clusters:
     member = np.flatnonzero(clusters > 0)
     row = np.searchsorted(ids, clusters[member])
@@ -237,12 +243,14 @@ def _cluster_table(
     np.maximum.at(high, row, xyz)
     label = np.zeros(len(ids), np.uint8)
     label[row] = labels[member]
-    obj = _objects(label, low, high, gap_m)
+    r1 = np.array([r1_m.get(int(c), 0.0) for c in label])
+    obj = group_objects(
+        label, low, high, gap_m=gap_m, r1=r1, bridge_m=bridge_m, patch_max_m=patch_max_m
+    )
     o_low = np.full((obj.max() + 1, 3), np.inf)
     o_high = np.full((obj.max() + 1, 3), -np.inf)
     np.minimum.at(o_low, obj, low)
     np.maximum.at(o_high, obj, high)
-    r1 = np.array([r1_m.get(int(c), 0.0) for c in label])
     r2 = np.linalg.norm(o_high - o_low, axis=1)[obj] / 2
     grown_low, grown_high = o_low[obj] - r1[:, None], o_high[obj] + r1[:, None]
     return _Clusters(label, obj, grown_low, grown_high, r1, r2, low, high)
@@ -254,25 +262,6 @@ def frame(up: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     x = np.cross([0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0], z)
     x /= np.linalg.norm(x)
     return np.stack([x, np.cross(z, x), z])
-
-
-def _objects(
-    label: npt.NDArray[np.uint8],
-    low: npt.NDArray[np.float64],
-    high: npt.NDArray[np.float64],
-    gap_m: float,
-) -> npt.NDArray[np.int64]:
-    """Return an object id per cluster: same-class clusters whose grown boxes overlap, chained."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    lo, hi = low - gap_m / 2, high + gap_m / 2
-    touch = np.all((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None]), axis=2)
-    touch &= label[:, None] == label[None]
-    a, b = np.nonzero(touch)
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(label),) * 2)
-    objects: npt.NDArray[np.int64] = connected_components(graph, directed=False)[1].astype(np.int64)
-    return objects
 
 
 def _hosts(table: _Clusters, patch_max_m: float = 0.0) -> npt.NDArray[np.bool_]:
