@@ -28,7 +28,7 @@ class RefineConfig:
     # compete with RANSAC's (plane_grid.local_plane: finds walls of a few % of the points); 0: off
     plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
     max_planes: int = 8  # planes tried at most, structural or not ...
-    structure_planes: int = 8  # ... then up to this many more, kept only as walls, floors or
+    structure_planes: int = 2  # ... then up to this many more, kept only as walls, floors or
     # ceilings (generator 4: desks, seats and sofas use up the 8 and walls were left out)
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
