@@ -77,6 +77,9 @@ class OdometryConfig:
     dense_scale: int = 2  # dense alignment on images downsampled by this factor
     dense_iterations: tuple[int, ...] = (10, 5, 3)  # keyframes: per pyramid level, finest first
     dense_frame_iterations: tuple[int, ...] = (3,)  # other frames: start from PnP, finest only
+    # sum the dense alignment on one thread, so that a recording gives the same trajectory and
+    # map every run (dense.one_thread; TUM fr1_rpy whole job 3-5 % slower); false: all threads
+    reproducible: bool = True
     dense_min_fitness: float = 0.3
     dense_max_correction_m: float = 0.05  # larger corrections of the PnP pose are rejected
     dense_max_correction_deg: float = 3.0

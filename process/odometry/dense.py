@@ -12,7 +12,7 @@ is smooth, hybrid elsewhere.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -71,8 +71,10 @@ class DenseAligner:
         iterations: tuple[int, ...],
         quick_iterations: tuple[int, ...] = (3,),
         method: str = "auto",
+        reproducible: bool = True,
     ) -> None:
         self.method = method
+        self.reproducible = reproducible
         self.scale = scale
         self.size = (intrinsics.width // scale, intrinsics.height // scale)
         k = intrinsics.matrix.copy()
@@ -130,7 +132,8 @@ class DenseAligner:
             exact = max(source.roughness, target.roughness) <= _MAX_ROUGHNESS
             method = "point_to_plane" if well_posed and exact else "hybrid"
         try:
-            with one_thread():  # see one_thread: Open3D's parallel sums vary in the last bits
+            # see one_thread: Open3D's parallel sums vary in the last bits
+            with one_thread() if self.reproducible else nullcontext():
                 result = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
                     source.rgbd,
                     target.rgbd,

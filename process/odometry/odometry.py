@@ -102,6 +102,7 @@ class Odometry:
             iterations=cfg.dense_iterations,
             quick_iterations=cfg.dense_frame_iterations,
             method=cfg.dense_method,
+            reproducible=cfg.reproducible,
         )
         readout = cfg.rolling_shutter_readout_s
         self.readout_s = float((recording_readout_s or 0.0) if readout is None else readout)

@@ -76,3 +76,32 @@ def test_the_canonical_order_sorts_by_x_then_y_then_z() -> None:
     shuffled = np.random.default_rng(0).permutation(points)
     assert np.array_equal(canonical_order(shuffled), expected)
     assert canonical_order(np.zeros((0, 3), np.float32)).shape == (0, 3)
+
+
+@pytest.mark.usefixtures("open3d_threads")
+@pytest.mark.parametrize("reproducible", [True, False])
+def test_the_dense_alignment_sums_on_one_thread_only_when_reproducible(
+    monkeypatch: pytest.MonkeyPatch, reproducible: bool
+) -> None:
+    from helpers_odometry import K_QVGA
+
+    from process.odometry.dense import DenseAligner
+
+    seen: list[int] = []
+    before = o3d.utility.get_max_threads()  # Open3D caps the fixture's 4 at the cores
+
+    def spy(*_args: Any) -> None:
+        seen.append(o3d.utility.get_max_threads())
+        raise RuntimeError("too few correspondences")  # align then gives up: None
+
+    monkeypatch.setattr(o3d.t.pipelines.odometry, "rgbd_odometry_multi_scale", spy)
+    aligner = DenseAligner(
+        K_QVGA, scale=2, max_depth_m=4.0, iterations=(3,), reproducible=reproducible
+    )
+    rng = np.random.default_rng(0)
+    gray = rng.integers(0, 255, (240, 320), dtype=np.uint8)
+    depth = np.full((240, 320), 1.5, np.float32)
+    image = aligner.prepare(gray, depth)
+    assert aligner.align(image, image, init_target_from_source=np.eye(4)) is None
+    assert seen == [1 if reproducible else before]
+    assert o3d.utility.get_max_threads() == before  # the process-wide limit is restored
