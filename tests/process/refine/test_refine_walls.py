@@ -4,6 +4,8 @@ around feet on a floor the network leaves unlabelled goes with the floor."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from helpers_refine import grid_patch
 
@@ -142,3 +144,34 @@ def test_label_bleed_around_feet_on_a_floor_goes_with_the_floor() -> None:
     assert not wide_object_regions(
         floor[:, :2], labels[: len(floor)], width_m=0.25, of_all=True
     ).any()
+
+
+def test_the_front_layer_of_a_thick_wall_stays_wall_a_screen_before_it_does_not() -> None:
+    """Raw depth makes a wall 2-3 cm thick (sigma 1.2 cm here), and RANSAC finds it as two
+    parallel planes; the front layer lies within the wall's own band, so it is no object on the
+    wall. A screen 7 cm before a thin wall (3 mm) is."""
+    rng = np.random.default_rng(0)
+    cfg = RefineConfig()
+    room = grid_patch((0.0, 4.0), (0.0, 4.0), z=0.0)  # a floor: the room's centre lies at y ~ 2
+    for sigma, proud, thick in ((0.012, 0.0, True), (0.003, 0.07, False)):
+        wall = grid_patch((0.0, 3.0), (0.0, 2.5))[:, [0, 2, 1]]
+        wall[:, 1] = 4.0 - np.abs(rng.normal(0.0, sigma, len(wall)))  # the room side: y < 4
+        front = grid_patch((0.5, 2.5), (0.5, 2.0))[:, [0, 2, 1]]
+        front[:, 1] = 4.0 - (0.03 if thick else proud) + rng.normal(0.0, 0.003, len(front))
+        points = np.concatenate([room, wall, front]).astype(np.float32)
+        n0, n1 = len(room), len(room) + len(wall)
+        back = np.arange(n0, n1)
+        layer = np.arange(n1, len(points))
+        model = np.array([0.0, 1.0, 0.0, -4.0])
+        planes = (
+            Plane(model, back, Label.WALL, back, 1.25),
+            Plane(np.array([0.0, 1.0, 0.0, -3.97]), layer, Label.WALL, layer, 1.25),
+        )
+        out = objects_on_walls(points, planes, cfg)
+        given = sum(p.on_wall for p in out)
+        if thick:
+            assert given == 0  # the front layer is the wall's own
+        else:
+            assert given > 0.9 * len(front)  # a screen on the wall goes back to the objects
+        off = objects_on_walls(points, planes, dataclasses.replace(cfg, structure_band_sigmas=0.0))
+        assert sum(p.on_wall for p in off) > 0.9 * len(front)  # without the band: both given
