@@ -110,10 +110,14 @@ def _within_band(
     if cfg.structure_band_sigmas <= 0 or len(wall.indices) < 10:
         return False
     own = points[wall.indices].astype(np.float64) @ model[:3] + model[3]
-    median = float(np.median(own))
-    sigma = 1.4826 * float(np.median(np.abs(own - median)))
-    band = median + cfg.structure_band_sigmas * sigma + cfg.plane_distance_m / 2
+    band = _noise_band(own, cfg.structure_band_sigmas) + cfg.plane_distance_m / 2
     return float(np.median(offset)) < band
+
+
+def _noise_band(offset: npt.NDArray[np.float64], sigmas: float) -> float:
+    """Return the median of a plane's point distances plus `sigmas` robust sigmas (1.4826 MAD)."""
+    median = float(np.median(offset))
+    return median + sigmas * 1.4826 * float(np.median(np.abs(offset - median)))
 
 
 def furniture_fronts(
@@ -214,9 +218,7 @@ def tighten_bands(
             continue
         model = _facing(plane.model, centre)
         offset = points[plane.removed].astype(np.float64) @ model[:3] + model[3]
-        median = float(np.median(offset))
-        sigma = 1.4826 * float(np.median(np.abs(offset - median)))
-        band = max(median + cfg.structure_band_sigmas * sigma, cfg.plane_distance_m / 4)
+        band = max(_noise_band(offset, cfg.structure_band_sigmas), cfg.plane_distance_m / 4)
         off = offset > band
         if band >= cfg.plane_distance_m or not off.any():
             out.append(plane)
