@@ -55,12 +55,13 @@ def wide_object_regions(
     labels: npt.NDArray[np.uint8],
     *,
     width_m: float,
-    of_all: bool = False,
+    min_share: float = 0.0,
 ) -> npt.NDArray[np.bool_]:
     """Return the points in object-labelled regions of the plane at least `width_m` wide.
 
-    A cell is object-labelled where most of its labelled points (`of_all`: of all its points)
-    carry an object label, and the region's unlabelled points go with it: regrowth may fill them.
+    A cell is object-labelled where most of its labelled points carry an object label and
+    they are over `min_share` of all its points, and the region's unlabelled points go with it:
+    regrowth may fill them.
 
     A plane's points that the network calls an object (4-10) are either label bleed, a band a
     few centimetres wide along the object's edge where it meets the floor or wall, or an
@@ -79,8 +80,14 @@ def wide_object_regions(
     shape = tuple(ij.max(axis=0) + 1)
     flat = np.ravel_multi_index((ij[:, 0], ij[:, 1]), shape)
     votes = np.bincount(flat, is_object, minlength=int(np.prod(shape)))
-    total = np.bincount(flat, None if of_all else labels > 0, minlength=int(np.prod(shape)))
-    mask = (2 * votes > total).reshape(shape)
+    size = int(np.prod(shape))
+    labelled = np.bincount(flat, labels > 0, minlength=size)
+    total = np.bincount(flat, minlength=size)
+    # the share of all points is taken over the opening's square: a sofa back seen with holes
+    # has cells of few labels among well-labelled ones, bleed on a bare wall has none
+    near_votes = ndimage.uniform_filter(votes.reshape(shape), 3, mode="constant")
+    near_total = ndimage.uniform_filter(total.reshape(shape).astype(float), 3, mode="constant")
+    mask = (2 * votes > labelled).reshape(shape) & (near_votes > min_share * near_total)
     square = np.ones((3, 3), bool)
     mask = ndimage.binary_opening(mask, square)
     out[:] = mask.ravel()[flat] & ((labels == 0) | is_object)

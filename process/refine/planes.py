@@ -249,12 +249,15 @@ def _classify(
         # objects lying flat on the structure stay objects; label bleed onto it does not. On a
         # floor or ceiling a region is the objects' only where they are most of all its points:
         # a network that labels no floor (VOC) leaves the bleed around feet and legs the only
-        # labels there (generator 3: 2,200 floor points regrown as person).
+        # labels there (generator 3: 2,200 floor points regrown as person). On a wall a quarter
+        # will do, as a sofa back against it is seen with holes; but not less: a network that
+        # labels no wall makes every cell with a few bleeding labels an object's (generator 5:
+        # the wall behind a desk, 4 % object labels, regrown as desk and monitor).
         flat = wide_object_regions(
             plane_uv(points[kept], model),
             labels[kept],
             width_m=cfg.plane_object_width_m,
-            of_all=label != Label.WALL,
+            min_share=cfg.wall_object_share if label == Label.WALL else 0.5,
         )
     removed = kept[~flat] if label else none
     return Plane(model, indices, label, removed, height, said, int(flat.sum()))

@@ -32,6 +32,7 @@ from scipy import ndimage
 from capture.recording import Label
 from process.refine.config import RefineConfig
 from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
+from process.refine.walls import facing, wall_band
 
 if TYPE_CHECKING:
     from process.refine.planes import Plane
@@ -62,7 +63,11 @@ def table_surfaces(
         note = "no floor plane: a table surface is found by its height above the floor"
         return tuple(p if p.label else replace(p, note=note) for p in planes), to_table
     floor_m = max(floors, key=lambda p: len(p.removed)).height_m
-    walls = [p.model for p in planes if p.label == Label.WALL]
+    centre = points.mean(axis=0, dtype=np.float64)
+    walls = []  # (model facing the room, how far in front its own points reach)
+    for wall in (p for p in planes if p.label == Label.WALL):
+        model = facing(wall.model, centre)
+        walls.append((model, wall_band(points, wall, model, cfg)))
     loose = None  # points no object class and no structural plane holds: a cabinet's sides
     if labels is not None:
         loose = labels < Label.TABLE
@@ -112,7 +117,7 @@ def _surface(
     up: npt.NDArray[np.float64],
     heights: npt.NDArray[np.float32],
     floor_m: float,
-    walls: list[npt.NDArray[np.float64]],
+    walls: list[tuple[npt.NDArray[np.float64], float]],
     cfg: RefineConfig,
     density: float,
     labels: npt.NDArray[np.uint8] | None,
@@ -124,10 +129,11 @@ def _surface(
     if tilt > cfg.table_tolerance_deg:
         return none, f"not level ({tilt:.0f} deg from gravity)"
     idx = plane.indices
-    for wall in walls:  # the band where the plane crosses a wall stays wall
-        idx = idx[
-            np.abs(points[idx] @ wall[:3].astype(np.float32) + wall[3]) > cfg.plane_distance_m
-        ]
+    for wall, band in walls:  # the band where the plane crosses a wall stays wall: a thick
+        # wall (raw depth) reaches farther than plane_distance_m into the room, and its points
+        # at a desk's height would join a desk and a cabinet along it into one piece
+        offset = points[idx] @ wall[:3].astype(np.float32) + wall[3]
+        idx = idx[(offset > band) | (offset < -cfg.plane_distance_m)]
     if len(idx) == 0 or not density > 0:
         return none, "no surface left off the walls"
     pieces = connected_pieces(plane_uv(points[idx], plane.model), PIECE_CELL_M)

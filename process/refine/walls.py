@@ -109,9 +109,22 @@ def _within_band(
     """
     if cfg.structure_band_sigmas <= 0 or len(wall.indices) < 10:
         return False
+    return float(np.median(offset)) < wall_band(points, wall, model, cfg)
+
+
+def wall_band(
+    points: npt.NDArray[np.float32], wall: Plane, model: npt.NDArray[np.float64], cfg: RefineConfig
+) -> float:
+    """Return how far in front of `model` (the wall, signed) the wall's own points reach.
+
+    The median of its inliers' distances plus `structure_band_sigmas` robust sigmas, and half
+    `plane_distance_m` more; at least `plane_distance_m`.
+    """
+    if cfg.structure_band_sigmas <= 0 or len(wall.indices) < 10:
+        return cfg.plane_distance_m
     own = points[wall.indices].astype(np.float64) @ model[:3] + model[3]
     band = _noise_band(own, cfg.structure_band_sigmas) + cfg.plane_distance_m / 2
-    return float(np.median(offset)) < band
+    return max(band, cfg.plane_distance_m)
 
 
 def _noise_band(offset: npt.NDArray[np.float64], sigmas: float) -> float:
@@ -165,15 +178,15 @@ def _parallel_walls(
         return
     centre = points.mean(axis=0, dtype=np.float64)
     parallel = math.cos(math.radians(cfg.horizontal_tolerance_deg))
-    facing = {b: _facing(planes[b].model, centre) for b in walls}
+    faced = {b: facing(planes[b].model, centre) for b in walls}
     for a in walls:
         normal = planes[a].model[:3]
         yield (
             a,
             [
-                (b, facing[b])
+                (b, faced[b])
                 for b in walls
-                if b != a and abs(float(normal @ facing[b][:3])) >= parallel
+                if b != a and abs(float(normal @ faced[b][:3])) >= parallel
             ],
         )
 
@@ -197,7 +210,7 @@ def _area_m2(uv: npt.NDArray[np.float32], cell_m: float = 0.1) -> float:
     return len(np.unique(grid_of(uv, cell_m), axis=0)) * cell_m**2
 
 
-def _facing(
+def facing(
     model: npt.NDArray[np.float64], centre: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.float64]:
     """Return the plane's model signed so that the room's centre lies on its positive side."""
@@ -216,7 +229,7 @@ def tighten_bands(
         if not plane.label or len(plane.removed) < 10:
             out.append(plane)
             continue
-        model = _facing(plane.model, centre)
+        model = facing(plane.model, centre)
         offset = points[plane.removed].astype(np.float64) @ model[:3] + model[3]
         band = max(_noise_band(offset, cfg.structure_band_sigmas), cfg.plane_distance_m / 4)
         off = offset > band
@@ -259,7 +272,7 @@ def behind_walls(
         return out
     centre = points.mean(axis=0, dtype=np.float64)
     for wall in walls:
-        model = _facing(wall.model, centre)
+        model = facing(wall.model, centre)
         offset = points @ model[:3].astype(np.float32) + np.float32(model[3])
         candidates = np.flatnonzero(offset < -cfg.wall_keep_out_m)
         if len(candidates):

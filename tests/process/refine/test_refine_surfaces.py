@@ -201,3 +201,59 @@ def test_a_bare_top_on_legs_is_a_table_a_bare_top_on_a_cabinet_is_not() -> None:
     labels[parts["counter"]] = Label.CLUTTER  # things on it the network sees: a table top
     seen = segment_planes(points, CFG, up=UP, labels=labels)
     assert seen.table is not None and seen.table[parts["counter"]].mean() > 0.9
+
+
+def test_a_thick_wall_does_not_join_a_desk_and_a_cabinet_along_it() -> None:
+    """Raw depth makes a wall 3-4 cm thick (|N(0, 1.5 cm)| into the room, 1 cm grid); its
+    points at a desk's height lie on the desk's plane along the whole wall and joined a desk
+    and a bare cabinet 30 cm from it into one piece, so the cabinet became table (generator 5's
+    office: 2,100 points). Only points beyond the wall's own noise band may join a piece."""
+    rng = np.random.default_rng(3)
+    wall = _upright((0.0, 4.0), (0.04, 2.5), 3.0)
+    wall = np.concatenate([wall, wall + np.array([0.01, 0.0, 0.01])])  # a 1 cm grid
+    wall[:, 1] -= np.abs(rng.normal(0.0, 0.015, len(wall)))
+    legs = [
+        np.concatenate([_upright((x, x + 0.04), (0.0, 0.72), y + d) for d in (0.0, 0.04)])
+        for x in (0.3, 1.66)
+        for y in (2.3, 2.9)
+    ]
+    ends = [
+        _upright((0.0, 0.6), (0.0, 0.72), 0.0)[:, [1, 0, 2]] + (x, 2.38, 0.0) for x in (2.0, 3.0)
+    ]
+    parts = {
+        "floor": (grid_patch((0.0, 4.0), (0.0, 3.0)), Label.FLOOR),
+        "wall": (wall, Label.WALL),
+        "desk": (grid_patch((0.3, 1.7), (2.3, 2.97), z=0.74), Label.TABLE),
+        "legs": (np.concatenate(legs), 0),
+        "cabinet": (grid_patch((2.0, 3.0), (2.38, 2.97), z=0.74), 0),
+        "front": (_upright((2.0, 3.0), (0.02, 0.72), 2.38), 0),
+        "ends": (np.concatenate(ends), 0),
+    }
+    jitter = rng.normal(0.0, 0.002, (sum(len(p) for p, _ in parts.values()), 3))
+    points = (np.concatenate([p for p, _ in parts.values()]) + jitter).astype(np.float32)
+    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab in parts.values()])
+    bounds = np.cumsum([0] + [len(p) for p, _ in parts.values()])
+    where = {n: slice(a, b) for n, a, b in zip(parts, bounds[:-1], bounds[1:], strict=True)}
+    # the planes as RANSAC finds them: each takes the points within plane_distance_m left over
+    taken = np.zeros(len(points), bool)
+    planes = []
+    for abcd, label in (
+        ((0.0, 1.0, 0.0, -3.0), Label.WALL),
+        ((0.0, 0.0, 1.0, 0.0), Label.FLOOR),
+        ((0.0, 0.0, 1.0, -0.74), 0),
+    ):
+        model = np.array(abcd)
+        inliers = np.flatnonzero(
+            ~taken & (np.abs(points @ model[:3] + model[3]) <= CFG.plane_distance_m)
+        )
+        taken[inliers] = True
+        removed = inliers if label else np.zeros(0, np.intp)
+        planes.append(Plane(model, inliers, label, removed, float(np.mean(points[inliers, 2]))))
+    density = 2500.0  # a 2 cm grid
+
+    found, table = table_surfaces(points, tuple(planes), UP, labels, CFG, density)
+    assert not table[where["cabinet"]].any()
+    assert "1 piece(s)" in found[2].note  # the desk
+    no_band = dataclasses.replace(CFG, structure_band_sigmas=0.0)  # the wall reaches D alone
+    found, table = table_surfaces(points, tuple(planes), UP, labels, no_band, density)
+    assert table[where["cabinet"]].mean() > 0.9
