@@ -120,6 +120,7 @@ def refinement_metrics(
         "rejoined_own_class": result.rejoined,
         "tabletop_objects": len(result.tabletop),
         "behind_walls_left_out": result.behind_walls,
+        "bare_faces_left_out": result.bare_faces,
         "seam_relabelled": len(result.seams),
         "final": int(result.kept.sum()),
     }

@@ -21,7 +21,7 @@ from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
-from process.refine.walls import behind_walls
+from process.refine.walls import bare_faces, behind_walls
 
 logger = logging.getLogger(__name__)
 
@@ -66,6 +66,7 @@ class RefineResult:
     behind_walls: int = 0  # unlabelled points behind a wall plane that regrowth left out
     seams: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices that took the class of the smooth surface they lie on (seams.py)
+    bare_faces: int = 0  # unlabelled points on large upright faces the network leaves bare
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -144,7 +145,7 @@ def refine(
     labels_ii[objects], clusters_ii[objects] = labels, clusters
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
-    n_behind = 0
+    n_behind = n_faces = 0
     tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -160,7 +161,14 @@ def refine(
             if cfg.regrow_structure
             else behind | np.isin(network[objects], STRUCTURAL_LABELS)
         )
+        # ... and lying on a large upright face the network leaves bare: furniture it has no
+        # class for (a cabinet's front under a plant on it; walls.bare_faces)
+        faces = bare_faces(
+            cloud.points, planes.planes, planes.up, cloud.labels, planes.min_points, cfg
+        )[objects]
+        keep_out |= faces
         n_behind = int((behind & (labels == 0)).sum())
+        n_faces = int((faces & (labels == 0)).sum())
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, bridge_m=cfg.object_bridge_m,
             up=planes.up, prior=prior, keep_out=keep_out, nest=cfg.nested_objects_yield,
@@ -192,7 +200,7 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams,
+        rejoined, tabletop, n_behind, seams, n_faces,
     )  # fmt: skip
 
 

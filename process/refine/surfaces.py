@@ -85,6 +85,7 @@ def table_surfaces(
             other = _other_cells(points, surface, plane, labels, cfg.table_other_cell_m)
             surface = surface[~other & np.isin(labels[surface], TO_TABLE)]
         to_table[surface] = True
+        note = f"{plane.note}; {note}" if plane.note else note  # e.g. why it is no wall
         out.append(replace(plane, note=note, table_points=len(surface)))
     return tuple(out), to_table
 
