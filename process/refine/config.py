@@ -45,7 +45,9 @@ class RefineConfig:
     # (walls.py; 0: the network's floor labels stand wherever they are)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
     bare_face_share: float = 0.1  # upright non-structural plane pieces of Min points with under
-    # this share labelled an object join no object in regrowth (walls.bare_faces); 0: off
+    # this share labelled an object join no object in regrowth (faces.py); 0: off
+    face_fill_share: float = 0.6  # ... on others where one class holds this share of their
+    # object labels, the points left 0 after regrowth take it (faces.py); 0: off
     wall_object_share: float = 0.25  # ... on a wall, cells where object labels are the most of
     # the labelled points and over this share of all (floor and ceiling: over half; planes.py)
     table_surfaces: bool = True  # a level plane at a desk's height is a table top (surfaces.py):
@@ -127,6 +129,8 @@ class RefineConfig:
             "plane_object_width_m": 0.0,
             "wall_object_depth_m": 0.0,
             "wall_keep_out_m": 0.0,
+            "bare_face_share": 0.0,
+            "face_fill_share": 0.0,
             "furniture_depth_m": 0.0,
             "plane_local_hypotheses": 0,
             "structure_band_sigmas": 0.0,
@@ -178,6 +182,7 @@ class RefineConfig:
             "structure_band_sigmas": (self.structure_band_sigmas, 0.0, 100.0),
             "wall_object_share": (self.wall_object_share, 0.0, 1.0),
             "bare_face_share": (self.bare_face_share, 0.0, 1.0),
+            "face_fill_share": (self.face_fill_share, 0.0, 1.0),
             "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),

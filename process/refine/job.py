@@ -121,6 +121,7 @@ def refinement_metrics(
         "tabletop_objects": len(result.tabletop),
         "behind_walls_left_out": result.behind_walls,
         "bare_faces_left_out": result.bare_faces,
+        "faces_filled": len(result.faces_filled),
         "seam_relabelled": len(result.seams),
         "final": int(result.kept.sum()),
     }

@@ -16,12 +16,13 @@ from process.errors import StageError
 from process.refine.cells import attached_clusters, capped_cells, sparse_inside_others
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
+from process.refine.faces import bare_faces, fill_faces
 from process.refine.outliers import sor_inliers
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
-from process.refine.walls import bare_faces, behind_walls
+from process.refine.walls import behind_walls
 
 logger = logging.getLogger(__name__)
 
@@ -67,6 +68,8 @@ class RefineResult:
     seams: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices that took the class of the smooth surface they lie on (seams.py)
     bare_faces: int = 0  # unlabelled points on large upright faces the network leaves bare
+    faces_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices left unlabelled by regrowth on a face one class holds, given it (faces.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -146,6 +149,7 @@ def refine(
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
+    filled = np.zeros(0, np.intp)
     tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -162,10 +166,8 @@ def refine(
             else behind | np.isin(network[objects], STRUCTURAL_LABELS)
         )
         # ... and lying on a large upright face the network leaves bare: furniture it has no
-        # class for (a cabinet's front under a plant on it; walls.bare_faces)
-        faces = bare_faces(
-            cloud.points, planes.planes, planes.up, cloud.labels, planes.min_points, cfg
-        )[objects]
+        # class for (a cabinet's front under a plant on it; faces.py)
+        faces = bare_faces(cloud.points, planes, cloud.labels, cfg)[objects]
         keep_out |= faces
         n_behind = int((behind & (labels == 0)).sum())
         n_faces = int((faces & (labels == 0)).sum())
@@ -186,6 +188,7 @@ def refine(
         clusters_iii[objects] = np.where(new_clusters > 0, new_clusters, clusters)
         regrown, r2, adopted = objects[grown.regrown], grown.r2_m, objects[grown.adopted]
         above, rejoined = grown.above_tables, grown.rejoined
+        filled = fill_faces(cloud.points, planes, network, labels_iii, clusters_iii, cfg)
     lap("regrowth")
     seams = np.zeros(0, np.intp)
     if cfg.seam_vote_m > 0:
@@ -200,7 +203,7 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams, n_faces,
+        rejoined, tabletop, n_behind, seams, n_faces, filled,
     )  # fmt: skip
 
 

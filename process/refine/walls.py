@@ -29,13 +29,6 @@ door or window recess, the recess's back and jambs stand 5-15 cm behind the wall
 more than `wall_keep_out_m` behind a wall plane, within the wall's extent, join no object in
 regrowth. The network's own labels there stand (through an open door: the next room's chairs).
 
-Bare faces: a large upright plane that is no wall (a cabinet's or wardrobe's front, too low
-for a wall or standing before one) and that the network labels under `bare_face_share` object
-is furniture it has no class for. An object standing on such furniture reaches down to the
-floor in regrowth (its pot, stem or legs are missed first), and walked down the front under it
-(generator 5's living room: 15,300 cabinet points made plant). The face's unlabelled points
-join no object. A desk's or chair's own face is labelled where it is seen.
-
 What the network calls floor well above the floor plane: on maps fused from simulated
 recordings the network calls chair seats and legs floor (0.05-0.8 m up); of the points it
 labels floor more than `floor_label_max_m` above the floor plane, 99 % are objects on five
@@ -54,7 +47,7 @@ import numpy.typing as npt
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
-from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
+from process.refine.plane_grid import grid_of, plane_uv
 
 if TYPE_CHECKING:
     from process.refine.planes import Plane
@@ -285,34 +278,4 @@ def behind_walls(
         if len(candidates):
             uv, own = plane_uv(points[candidates], model), plane_uv(points[wall.removed], model)
             out[candidates[_within_extent(uv, own)]] = True
-    return out
-
-
-def bare_faces(
-    points: npt.NDArray[np.float32],
-    planes: tuple[Plane, ...],
-    up: npt.NDArray[np.float64] | None,
-    labels: npt.NDArray[np.uint8],
-    min_points: int,
-    cfg: RefineConfig,
-) -> npt.NDArray[np.bool_]:
-    """Return the points of large upright faces the network leaves bare (module docstring).
-
-    A face: a connected piece (gaps over 10 cm separate) of `min_points` (the plane step's Min)
-    of an upright plane that is not structure; bare: under `bare_face_share` of it labelled an
-    object class. Measured: on generator 5 +0.008 to +0.045 (F1 over the objects) on 5 of 14
-    clouds, no other of the 46 earlier test clouds changed by more than 0.002.
-    """
-    out = np.zeros(len(points), bool)
-    if up is None or cfg.bare_face_share <= 0:
-        return out
-    upright = math.sin(math.radians(cfg.horizontal_tolerance_deg))
-    for plane in planes:
-        if plane.label or abs(float(plane.model[:3] @ up)) > upright:
-            continue
-        piece = connected_pieces(plane_uv(points[plane.indices], plane.model), PIECE_CELL_M)
-        sizes = np.bincount(piece)
-        objects = np.bincount(piece, labels[plane.indices] >= Label.TABLE, minlength=len(sizes))
-        bare = (sizes >= min_points) & (objects < cfg.bare_face_share * sizes)
-        out[plane.indices[bare[piece]]] = True
     return out

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from helpers_refine import grid_patch, labelled
+from helpers_refine import grid_patch
 
 from benchmarks.generator3 import gen3_scene
 from capture.recording import Label
@@ -199,41 +199,3 @@ def test_the_front_layer_of_a_thick_wall_stays_wall_a_screen_before_it_does_not(
             assert given > 0.9 * len(front)  # a screen on the wall goes back to the objects
         off = objects_on_walls(points, planes, dataclasses.replace(cfg, structure_band_sigmas=0.0))
         assert sum(p.on_wall for p in off) > 0.9 * len(front)  # without the band: both given
-
-
-def test_a_plant_on_a_cabinet_does_not_grow_down_its_bare_front() -> None:
-    """A plant stands on a cabinet the network has no class for. A plant's box reaches down to
-    the floor (its pot and stem are missed first), and regrowth walked down the cabinet's front
-    under it (generator 5's living room: 15,300 points made plant). The front is a large
-    upright plane the network leaves bare: no object grows over it."""
-    rng = np.random.default_rng(5)
-    floor = grid_patch((0.0, 4.0), (0.0, 3.0))
-    wall = _wall(3.0, (0.0, 4.0), 2.5, step=0.02)
-    top = grid_patch((1.0, 2.0), (2.4, 3.0), z=0.9)
-    front = _wall(2.4, (1.0, 2.0), 0.88, step=0.02)
-    side = grid_patch((2.4, 3.0), (0.0, 0.88))  # (y, z, 0)
-    sides = [np.column_stack([np.full(len(side), x), side[:, 0], side[:, 1]]) for x in (1.0, 2.0)]
-    leaves = rng.normal((1.5, 2.55, 1.15), 0.12, (3000, 3))
-    leaves = leaves[leaves[:, 2] > 0.93]
-    pot = grid_patch((1.42, 1.58), (2.47, 2.63), z=0.95, step=0.01)
-    points = np.concatenate([floor, wall, top, front, *sides, leaves, pot]).astype(np.float32)
-    points += rng.normal(0.0, 0.002, points.shape).astype(np.float32)
-    labels = np.zeros(len(points), np.uint8)
-    labels[: len(floor)] = Label.FLOOR
-    labels[len(floor) : len(floor) + len(wall)] = Label.WALL
-    at = len(floor) + len(wall) + len(top)
-    is_front = np.zeros(len(points), bool)
-    is_front[at : at + len(front)] = True
-    plant = np.zeros(len(points), bool)
-    plant[len(points) - len(leaves) - len(pot) :] = True
-    labels[plant & (rng.random(len(points)) < 0.7)] = Label.PLANT  # 30 % missed
-    cloud = labelled(points, labels)
-    up = np.array([0.0, 0.0, 1.0])
-
-    out = refine(cloud, CFG, up=up)
-    assert (out.labels_iii[plant] == Label.PLANT).mean() > 0.9
-    assert (out.labels_iii[is_front] == Label.PLANT).sum() == 0
-    section = refinement_metrics(out, gt_cloud=None)
-    assert section["points"]["bare_faces_left_out"] >= len(front) * 0.9
-    grown = refine(cloud, dataclasses.replace(CFG, bare_face_share=0.0), up=up)
-    assert (grown.labels_iii[is_front] == Label.PLANT).sum() > 500
