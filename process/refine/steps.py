@@ -167,7 +167,7 @@ def refine(
         )
         # ... and lying on a large upright face the network leaves bare: furniture it has no
         # class for (a cabinet's front under a plant on it; faces.py)
-        faces = bare_faces(cloud.points, planes, cloud.labels, cfg)[objects]
+        faces = bare_faces(cloud.points, planes, network, cfg)[objects]
         keep_out |= faces
         n_behind = int((behind & (labels == 0)).sum())
         n_faces = int((faces & (labels == 0)).sum())
