@@ -62,12 +62,15 @@ def fill_faces(
     labels: npt.NDArray[np.uint8],
     clusters: npt.NDArray[np.int32],
     cfg: RefineConfig,
+    *,
+    open_: npt.NDArray[np.bool_] | None = None,
 ) -> npt.NDArray[np.intp]:
     """Give each face's unlabelled points its class, where one class holds the face (in place).
 
     The network's labels (`network`) decide whose a face is; `labels` and `clusters` are the
     refined ones (after regrowth), and a filled point joins the largest cluster of the face's
-    class on it. Returns the indices of the points filled.
+    class on it; `open_`: the points that may be filled (not SOR's outliers), all if None.
+    Returns the indices of the points filled.
     """
     filled: list[npt.NDArray[np.intp]] = []
     if cfg.face_fill_share <= 0:
@@ -80,7 +83,7 @@ def fill_faces(
         counts = np.bincount(objects)
         top = int(np.argmax(counts))
         lab = labels[face]
-        empty = face[lab == 0]
+        empty = face[(lab == 0) if open_ is None else (lab == 0) & open_[face]]
         if counts[top] < cfg.face_fill_share * len(objects) or len(empty) == 0:
             continue
         own = clusters[face[lab == top]]

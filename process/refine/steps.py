@@ -55,7 +55,7 @@ class RefineResult:
     clusters_ii: npt.NDArray[np.int32]  # (N,)
     labels_iii: npt.NDArray[np.uint8]  # (N,) after regrowth
     clusters_iii: npt.NDArray[np.int32]  # (N,)
-    regrown: npt.NDArray[np.intp]  # input indices that regrowth labelled
+    regrown: npt.NDArray[np.intp]  # input indices that regrowth labelled (faces filled too)
     r2_m: dict[int, float] = field(default_factory=dict)  # cluster id -> regrowth r2
     seconds: dict[str, float] = field(default_factory=dict)  # step -> wall time
     adopted: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
@@ -67,7 +67,7 @@ class RefineResult:
     behind_walls: int = 0  # unlabelled points behind a wall plane that regrowth left out
     seams: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices that took the class of the smooth surface they lie on (seams.py)
-    bare_faces: int = 0  # unlabelled points on large upright faces the network leaves bare
+    bare_faces: int = 0  # unlabelled points on large faces the network leaves bare (faces.py)
     faces_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices left unlabelled by regrowth on a face one class holds, given it (faces.py)
 
@@ -188,7 +188,12 @@ def refine(
         clusters_iii[objects] = np.where(new_clusters > 0, new_clusters, clusters)
         regrown, r2, adopted = objects[grown.regrown], grown.r2_m, objects[grown.adopted]
         above, rejoined = grown.above_tables, grown.rejoined
-        filled = fill_faces(cloud.points, planes, network, labels_iii, clusters_iii, cfg)
+        open_ = np.zeros(len(cloud), bool)
+        open_[objects] = True  # not on a structural plane, not SOR's outlier
+        filled = fill_faces(
+            cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
+        )
+        regrown = np.union1d(regrown, filled)  # shown with the regrown points in the .rrd
     lap("regrowth")
     seams = np.zeros(0, np.intp)
     if cfg.seam_vote_m > 0:

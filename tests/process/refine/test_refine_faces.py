@@ -76,6 +76,7 @@ def test_a_screen_seen_in_part_is_one_object() -> None:
     out = refine(labelled(points, labels), CFG, up=UP)
     assert (out.labels_iii[at:] == Label.TV_MONITOR).mean() > 0.95
     assert refinement_metrics(out, gt_cloud=None)["points"]["faces_filled"] > 500
+    assert np.isin(out.faces_filled, out.regrown).all()  # shown as regrown in the .rrd
     unfilled = refine(
         labelled(points, labels), dataclasses.replace(CFG, face_fill_share=0.0), up=UP
     )
