@@ -46,6 +46,7 @@ class RefineConfig:
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
     bare_face_share: float = 0.1  # upright non-structural plane pieces of Min points with under
     # this share labelled an object join no object in regrowth (faces.py); 0: off
+    face_min_area_m2: float = 0.5  # a face: this large, or the plane step's Min if fewer points
     face_fill_share: float = 0.6  # ... on others where one class holds this share of their
     # object labels, the points left 0 after regrowth take it (faces.py); 0: off
     wall_object_share: float = 0.25  # ... on a wall, cells where object labels are the most of
@@ -183,6 +184,7 @@ class RefineConfig:
             "wall_object_share": (self.wall_object_share, 0.0, 1.0),
             "bare_face_share": (self.bare_face_share, 0.0, 1.0),
             "face_fill_share": (self.face_fill_share, 0.0, 1.0),
+            "face_min_area_m2": (self.face_min_area_m2, 0.0, 100.0),
             "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),

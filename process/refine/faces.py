@@ -1,10 +1,10 @@
-"""Faces: large upright planes that are no structure, told apart by what the network sees on them.
+"""Faces: large planes that are no structure, told apart by what the network sees on them.
 
-RANSAC's planes past the walls include the upright faces of furniture: a cabinet's or a
-wardrobe's front, a television's screen, a desk's side. The plane step leaves them to the
-objects (they are neither floor, ceiling nor wall); here each connected piece (gaps over
-10 cm separate) of at least the plane step's Min points is one face, and the network's labels
-on it say what it is:
+RANSAC's planes past the walls include the faces of furniture: a cabinet's or a wardrobe's
+front or top, a television's screen, a desk's side. The plane step leaves them to the objects
+(they are neither floor, ceiling nor wall); here each large connected piece (gaps over 10 cm
+separate) of an upright or level one is a face (`_faces`), and the network's labels on it say
+what it is:
 
 - Bare (under `bare_face_share` of it labelled an object class): furniture the network has no
   class for. An object standing on such furniture reaches down to the floor in regrowth (its
@@ -15,7 +15,8 @@ on it say what it is:
   never bare).
 - One object's (not bare, and one class holds `face_fill_share` of its object labels): a
   screen seen with most of it missed. After regrowth its points still unlabelled take that
-  class: regrowth reaches only r1 beyond the object's box, and the box is only the part the
+  class (upright faces only: a desk's top filled by its majority cost generator 4 up to
+  0.005): regrowth reaches only r1 beyond the object's box, and the box is only the part the
   network saw (generator 2's room 6: a television 80 % unlabelled, three quarters of its labels
   monitor and the rest a seated person's bleed; F1 of the class 0.779 -> 0.847).
 
@@ -100,7 +101,11 @@ def _faces(
     *,
     level_too: bool = False,
 ) -> Iterator[npt.NDArray[np.intp]]:
-    """Yield the inliers of each piece of Min points of each upright plane that is no structure.
+    """Yield the inliers of each large piece of each upright plane that is no structure.
+
+    Large: the plane step's Min points, or `face_min_area_m2` at the cloud's density where
+    that is fewer (a 200k-point generator-5 room's Min is 13,000 points, 1.7 m^2: a television
+    stand's top, 0.6 m^2, was no face).
 
     `level_too`: of each level one too (a cabinet's top); table surfaces are labelled table.
     """
@@ -108,11 +113,14 @@ def _faces(
         return
     upright = math.sin(math.radians(cfg.horizontal_tolerance_deg))
     level = math.cos(math.radians(cfg.horizontal_tolerance_deg))
+    least = float(planes.min_points)  # a plane's Min, or face_min_area_m2 if that is fewer
+    if math.isfinite(planes.density_per_m2):
+        least = min(least, cfg.face_min_area_m2 * planes.density_per_m2)
     for plane in planes.planes:
         cosine = abs(float(plane.model[:3] @ planes.up))
         if plane.label or (cosine > upright and not (level_too and cosine >= level)):
             continue
         piece = connected_pieces(plane_uv(points[plane.indices], plane.model), PIECE_CELL_M)
         sizes = np.bincount(piece)
-        for k in np.flatnonzero(sizes >= max(planes.min_points, 1)):
+        for k in np.flatnonzero(sizes >= max(least, 1)):
             yield plane.indices[piece == k]
