@@ -44,6 +44,8 @@ class RefineConfig:
     floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
     # (walls.py; 0: the network's floor labels stand wherever they are)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
+    floor_leaf: bool = True  # unlabelled points on the floor plane join an object in regrowth
+    # but pass growth on to no other point (regrowth.py); False: they relay it
     bare_face_share: float = 0.1  # upright non-structural plane pieces of Min points with under
     # this share labelled an object join no object in regrowth (faces.py); 0: off
     face_min_area_m2: float = 0.5  # a face: this large, or the plane step's Min if fewer points
@@ -132,6 +134,7 @@ class RefineConfig:
             "wall_keep_out_m": 0.0,
             "bare_face_share": 0.0,
             "face_fill_share": 0.0,
+            "floor_leaf": False,
             "furniture_depth_m": 0.0,
             "plane_local_hypotheses": 0,
             "structure_band_sigmas": 0.0,

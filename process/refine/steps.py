@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from capture.recording import NUM_LABELS, OBJECT_LABELS, STRUCTURAL_LABELS
+from capture.recording import NUM_LABELS, OBJECT_LABELS, STRUCTURAL_LABELS, Label
 from process.cloud import LabelledCloud
 from process.errors import StageError
 from process.refine.cells import attached_clusters, capped_cells, sparse_inside_others
@@ -169,11 +169,19 @@ def refine(
         # class for (a cabinet's front under a plant on it; faces.py)
         faces = bare_faces(cloud.points, planes, network, cfg)[objects]
         keep_out |= faces
+        leaf = None
+        if cfg.floor_leaf:  # unlabelled floor-plane points join objects but relay no growth
+            on_floor = np.zeros(len(cloud), bool)
+            for plane in planes.planes:
+                if plane.label == Label.FLOOR:
+                    on_floor[plane.indices] = True
+            leaf = on_floor[objects] & (labels == 0)
         n_behind = int((behind & (labels == 0)).sum())
         n_faces = int((faces & (labels == 0)).sum())
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, bridge_m=cfg.object_bridge_m,
-            up=planes.up, prior=prior, keep_out=keep_out, nest=cfg.nested_objects_yield,
+            up=planes.up, prior=prior, keep_out=keep_out, leaf=leaf,
+            nest=cfg.nested_objects_yield,
             adopt_ratio=cfg.nested_adopt_ratio, patch_max_m=cfg.nested_patch_max_m,
             table_top_m=cfg.table_top_m, rejoin=cfg.rejoin_own_class,
         )  # fmt: skip

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from helpers_refine import grid_patch
 
+from capture.recording import Label
 from process.refine.regrowth import regrow
 
 
@@ -371,3 +372,36 @@ def test_a_piece_of_a_table_leg_beside_a_chair_stays_the_tables() -> None:
     grown = regrow(points, labels, clusters.astype(np.int32), up=np.array([0.0, 0.0, 1.0]), **kw)  # type: ignore[arg-type]
     assert (grown.labels[n_table : n_table + len(leg_low)] == 4).all()  # the leg: table
     assert (grown.labels[on_seat] == 5).all()  # the flat patch: the chair's
+
+
+def test_floor_points_join_from_a_leg_but_relay_no_growth() -> None:
+    """A table (top at 0.74 m, four legs) over a floor whose upper voxel layer (1 cm up) the
+    noise band gave back, unlabelled. The table's box reaches down to the floor: unchecked,
+    its growth crept from the legs along the whole layer under it. As leaves the floor points
+    join only within r1 of a leg."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.74)
+    legs = [
+        np.column_stack([np.full(37, x), np.full(37, y), np.arange(37) * 0.02])
+        for x in (0.02, 1.16)
+        for y in (0.02, 0.76)
+    ]
+    layer = grid_patch((-0.2, 1.4), (-0.2, 1.0), z=0.01)
+    points = np.concatenate([top, *legs, layer]).astype(np.float32)
+    n_table = len(top) + 4 * 37
+    labels = np.zeros(len(points), np.uint8)
+    labels[:n_table] = Label.TABLE
+    clusters = np.zeros(len(points), np.int32)
+    clusters[:n_table] = 1
+    leaf = np.zeros(len(points), bool)
+    leaf[n_table:] = True
+    up = np.array([0.0, 0.0, 1.0])
+    on_layer = slice(n_table, len(points))
+
+    crept = regrow(points, labels, clusters, r1_m={Label.TABLE: 0.05}, up=up)
+    assert (crept.labels[on_layer] == Label.TABLE).sum() > 2000  # the layer under the top
+    held = regrow(points, labels, clusters, r1_m={Label.TABLE: 0.05}, up=up, leaf=leaf)
+    joined = held.labels[on_layer] == Label.TABLE
+    assert 0 < joined.sum() < 200
+    feet = np.array([(x, y) for x in (0.02, 1.16) for y in (0.02, 0.76)])
+    near = np.linalg.norm(layer[:, None, :2] - feet[None], axis=2).min(axis=1)
+    assert (near[joined] <= 0.05).all()  # only beside the legs
