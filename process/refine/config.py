@@ -44,15 +44,15 @@ class RefineConfig:
     floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
     # (walls.py; 0: the network's floor labels stand wherever they are)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
-    floor_leaf: bool = True  # unlabelled points on the floor plane join an object in regrowth
-    # but pass growth on to no other point (regrowth.py); False: they relay it
-    bare_face_share: float = 0.1  # upright non-structural plane pieces of Min points with under
-    # this share labelled an object join no object in regrowth (faces.py); 0: off
-    face_min_area_m2: float = 0.5  # a face: this large, or the plane step's Min if fewer points
-    face_fill_share: float = 0.6  # ... on others where one class holds this share of their
-    # object labels, the points left 0 after regrowth take it (faces.py); 0: off
     wall_object_share: float = 0.25  # ... on a wall, cells where object labels are the most of
     # the labelled points and over this share of all (floor and ceiling: over half; planes.py)
+    # faces: pieces of upright or level planes that are no structure, this large (or the plane
+    # step's Min if fewer points; faces.py) ...
+    face_min_area_m2: float = 0.5
+    bare_face_share: float = 0.1  # ... labelled an object on under this share join no object in
+    # regrowth; 0: off
+    face_fill_share: float = 0.6  # ... upright ones where one class holds this share of their
+    # object labels give it to their points left 0 after regrowth; 0: off
     table_surfaces: bool = True  # a level plane at a desk's height is a table top (surfaces.py):
     table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
     table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
@@ -85,6 +85,8 @@ class RefineConfig:
     # up to this far apart when a wrong-class patch touches both (a sofa's seat called chair
     # between its back and front: a fused simulated map gained 0.049; objects.py); 0: off
     object_bridge_m: float = 0.5
+    floor_leaf: bool = True  # unlabelled points on the floor plane join an object in regrowth
+    # but pass growth on to no other point (regrowth.py); False: they relay it
     sparse_clusters_yield: bool = True  # a cluster sparse at the paper's MinPts goes to 0
     # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept

@@ -180,8 +180,7 @@ def refine(
         n_faces = int((faces & (labels == 0)).sum())
         grown = regrow(
             points, labels, seeds, r1_m=r1, gap_m=cfg.object_gap_m, bridge_m=cfg.object_bridge_m,
-            up=planes.up, prior=prior, keep_out=keep_out, leaf=leaf,
-            nest=cfg.nested_objects_yield,
+            up=planes.up, prior=prior, keep_out=keep_out, leaf=leaf, nest=cfg.nested_objects_yield,
             adopt_ratio=cfg.nested_adopt_ratio, patch_max_m=cfg.nested_patch_max_m,
             table_top_m=cfg.table_top_m, rejoin=cfg.rejoin_own_class,
         )  # fmt: skip
