@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers_refine import grid_patch
+from helpers_refine import grid_patch, labelled
 
 from capture.recording import Label
+from process.refine import RefineConfig, refine
 from process.refine.regrowth import regrow
 
 
@@ -405,3 +406,36 @@ def test_floor_points_join_from_a_leg_but_relay_no_growth() -> None:
     feet = np.array([(x, y) for x in (0.02, 1.16) for y in (0.02, 0.76)])
     near = np.linalg.norm(layer[:, None, :2] - feet[None], axis=2).min(axis=1)
     assert (near[joined] <= 0.05).all()  # only beside the legs
+
+
+def test_refine_keeps_a_table_off_the_upper_layer_of_a_voxel_floor() -> None:
+    """The same through `refine`: a floor the network leaves unlabelled (VOC), fused in two
+    voxel layers (a quarter of it 1.2 cm up, round the table), which the floor's noise band
+    gives back; a table on it labelled table. With `floor_leaf` (the default) the table takes
+    the layer only beside its legs; without, it spreads over the layer under its top."""
+    rng = np.random.default_rng(7)
+    floor = grid_patch((0.0, 4.0), (0.0, 3.0))
+    upper = (np.abs(floor[:, 0] - 2.0) < 1.0) & (np.abs(floor[:, 1] - 1.4) < 0.8)
+    floor[upper, 2] = 0.012
+    wall = grid_patch((0.0, 4.0), (0.0, 2.5))[:, [0, 2, 1]]
+    wall[:, 1] = 3.0
+    top = grid_patch((1.4, 2.6), (1.0, 1.8), z=0.74)
+    legs = [
+        np.column_stack([np.full(36, x), np.full(36, y), 0.02 + np.arange(36) * 0.02])
+        for x in (1.42, 2.56)
+        for y in (1.02, 1.76)
+    ]
+    points = np.concatenate([floor, wall, top, *legs]).astype(np.float32)
+    points += rng.normal(0.0, 0.002, points.shape).astype(np.float32)
+    labels = np.zeros(len(points), np.uint8)
+    labels[len(floor) + len(wall) :] = Label.TABLE
+    under = np.zeros(len(points), bool)
+    under[: len(floor)] = (np.abs(floor[:, 0] - 2.0) < 0.45) & (np.abs(floor[:, 1] - 1.4) < 0.25)
+    cfg = RefineConfig(plane_min_points=2000)
+    cloud = labelled(points, labels)
+    up = np.array([0.0, 0.0, 1.0])
+
+    held = refine(cloud, cfg, up=up)
+    crept = refine(cloud, RefineConfig(plane_min_points=2000, floor_leaf=False), up=up)
+    assert (crept.labels_iii[under] == Label.TABLE).mean() > 0.5
+    assert (held.labels_iii[under] == Label.TABLE).mean() < 0.1
