@@ -1,0 +1,222 @@
+"""The refinement's 58 test clouds: phase I and III F1 of each, against its ground truth.
+
+The clouds of generators 1-5, TSDF maps of degraded simulated keyframes and the fused maps of
+five 300-frame simulated recordings (`process run`), each with its truth and gravity-up (none for
+the recordings' maps: refinement finds it). Making them took 12 minutes on 2 cores, so each is kept
+in `--cache` (an .npz per cloud, 0.6 GB in all) and made once; refining all of them takes 6.
+
+    python -m benchmarks.refine_suite [--cache DIR] [--only SUBSTRING] [--make-only] [--paper]
+                                      [--set FIELD=VALUE ...]
+
+`--set` changes one RefineConfig field (`--set piece_vote=false --set seam_vote_m=0.05`), to
+measure a setting against ground truth on all the clouds before making it the default.
+
+One line per cloud: name, points, object points, F1 phase I, II, III and III - I, then the mean
+and how many reach 0.95 per generator. Written for issue 12: the README's refinement figures per
+generator come from this list.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+from typing import Any, Final, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from process.cloud import LabelledCloud
+
+CACHE: Final = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "semreplay-suite"
+TESTS: Final = Path(__file__).resolve().parents[1] / "tests"
+
+
+class Case(NamedTuple):
+    """One labelled test cloud with its truth."""
+
+    cloud: LabelledCloud
+    truth: npt.NDArray[np.uint8]
+    up: npt.NDArray[np.float64] | None  # None: refinement guesses it
+
+
+def _gen1(seed: int, spacing_m: float) -> Case:
+    from benchmarks.synthetic_office import indoor_scene
+
+    s = indoor_scene(seed=seed, spacing_m=spacing_m)
+    return Case(s.cloud, s.truth, np.array([0.0, 0.0, 1.0]))
+
+
+def _gen2(seed: int, spacing_m: float) -> Case:
+    sys.path.insert(0, str(TESTS))
+    from helpers_refine_sim import sim_scene
+
+    s = sim_scene(seed=seed, spacing_m=spacing_m)
+    return Case(s.cloud, s.truth, s.up)
+
+
+def _tsdf(seed: int) -> Case:
+    sys.path.insert(0, str(TESTS))
+    from helpers_refine_sim import sim_fused_map
+
+    s = sim_fused_map(seed=seed, keyframes=20)
+    return Case(s.cloud, s.truth, s.up)
+
+
+def _gen3(seed: int, spacing_m: float, rotate: bool = False) -> Case:
+    from benchmarks.generator3 import gen3_scene
+
+    s = gen3_scene(seed=seed, spacing_m=spacing_m, rotate=rotate)
+    return Case(s.cloud, s.truth, s.up)
+
+
+def _gen4(seed: int, object_points: int) -> Case:
+    from benchmarks.generator4 import gen4_scene
+
+    s = gen4_scene(seed=seed, object_points=object_points)
+    return Case(s.cloud, s.truth, s.up)
+
+
+def _gen5(seed: int, size: str) -> Case:
+    from benchmarks.generator5 import sized_scene
+
+    s = sized_scene(seed, size)
+    return Case(s.cloud, s.truth, s.up)
+
+
+def _recording(seed: int, frames: int = 300) -> Case:
+    """The fused map (phase I) of `process run` on a simulated recording, truth by nearest point."""
+    from capture.recording import GT_CLOUD_ATTACHMENT, RecordingReader
+    from process.cloud import parse_ply, read_cloud
+    from process.evaluate import match_labels
+
+    bin_dir = Path(sys.executable).parent
+    with tempfile.TemporaryDirectory() as tmp:
+        rec, out = Path(tmp) / "sim.mcap", Path(tmp) / "run"
+        for cmd in (
+            [bin_dir / "semreplay-capture", "simulate", rec, "--seed", seed, "--frames", frames],
+            [bin_dir / "semreplay-process", "run", rec, "--out", out, "--no-viz"],
+        ):
+            subprocess.run([str(c) for c in cmd], check=True, capture_output=True)
+        cloud = read_cloud(out / "map_fused.ply")
+        with RecordingReader(rec) as reader:
+            gt = parse_ply(reader.attachment(GT_CLOUD_ATTACHMENT) or b"", source="ground truth")
+    return Case(cloud, match_labels(cloud.points, gt, max_distance_m=0.05), None)
+
+
+def cases() -> dict[str, Callable[[], Case]]:
+    """Return the 58 clouds by name, each made on demand."""
+    made: dict[str, Callable[[], Case]] = {
+        "g1 office 1.6cm": partial(_gen1, 0, 0.016),
+        "g1 office 3cm": partial(_gen1, 1, 0.03),
+        "tsdf room 0": partial(_tsdf, 0),
+        "tsdf room 1": partial(_tsdf, 1),
+    }
+    spacing2 = (0.02, 0.016, 0.012, 0.008, 0.018, 0.025, 0.01)
+    for seed in range(14):
+        sp = spacing2[seed % len(spacing2)]
+        made[f"g2 room {seed} {sp * 100:g}cm"] = partial(_gen2, seed, sp)
+    for seed in range(8):
+        sp = {6: 0.016, 7: 0.007}.get(seed, 0.011)
+        made[f"g3 room {seed} {sp * 100:g}cm"] = partial(_gen3, seed, sp)
+    made["g3 room 5 0.7cm turned"] = partial(_gen3, 5, 0.007, rotate=True)
+    rooms = ("office", "kitchen", "living", "meeting")
+    for i, points in enumerate((60_000, 200_000, 500_000)):
+        for r, room in enumerate(rooms):
+            made[f"g4 {room} {points // 1000}k"] = partial(_gen4, 4 * i + r, points)
+    for seed in range(4):
+        made[f"g5 {rooms[seed]} 60k"] = partial(_gen5, seed, "60k")
+    for seed in range(8):
+        made[f"g5 seed {seed} 200k"] = partial(_gen5, seed, "200k")
+    for seed in range(2):
+        made[f"g5 {rooms[seed]} 500k"] = partial(_gen5, seed, "500k")
+    for seed in (7, 8, 9, 12, 13):
+        made[f"rec seed {seed} 300f"] = partial(_recording, seed)
+    return made
+
+
+def load(name: str, make: Callable[[], Case], cache: Path) -> Case:
+    """Return the case from `cache`, making and storing it first if it is not there."""
+    path = cache / (name.replace(" ", "_") + ".npz")
+    if not path.exists():
+        case = make()
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(
+            tmp,
+            points=case.cloud.points,
+            colors=case.cloud.colors,
+            labels=case.cloud.labels,
+            truth=case.truth,
+            up=np.full(3, np.nan) if case.up is None else case.up,
+        )
+        tmp.replace(path)
+    with np.load(path) as z:
+        up = None if np.isnan(z["up"]).any() else z["up"].astype(np.float64)
+        cloud = LabelledCloud(z["points"], z["colors"], z["labels"])
+        return Case(cloud, z["truth"], up)
+
+
+def _field(cfg: object, text: str) -> tuple[str, Any]:
+    """Return (name, value) of a FIELD=VALUE, the value of the field's type."""
+    name, _, value = text.partition("=")
+    if not hasattr(cfg, name):
+        raise SystemExit(f"--set: RefineConfig has no field {name!r}; see process/refine/config.py")
+    current = getattr(cfg, name)
+    if isinstance(current, bool):
+        return name, value.lower() in ("1", "true", "yes", "on")
+    if isinstance(current, tuple):
+        return name, tuple(float(v) for v in value.split(","))
+    return name, type(current)(value)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from process.evaluate import label_metrics
+    from process.refine import RefineConfig, refine
+
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.refine_suite")
+    parser.add_argument("--cache", type=Path, default=CACHE)
+    parser.add_argument("--only", default="", help="clouds whose name holds this")
+    parser.add_argument("--make-only", action="store_true", help="make the clouds, refine none")
+    parser.add_argument("--paper", action="store_true", help="RefineConfig.paper()")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
+    args = parser.parse_args(argv)
+    cfg = RefineConfig.paper() if args.paper else RefineConfig()
+    cfg = dataclasses.replace(cfg, **dict(_field(cfg, text) for text in args.set))
+    gains: dict[str, list[float]] = {}
+    for name, make in cases().items():
+        if args.only not in name:
+            continue
+        case = load(name, make, args.cache)
+        if args.make_only:
+            print(f"{name}: {len(case.cloud):,} points", flush=True)
+            continue
+        t0 = time.perf_counter()
+        result = refine(case.cloud, cfg, up=case.up)
+        seconds = time.perf_counter() - t0
+        f1 = {
+            p: label_metrics(c.labels, case.truth)["all"]["f1"]
+            for p, c in result.phase_clouds().items()
+        }
+        objects = int((case.truth >= 4).sum())
+        print(
+            f"{name:24s} {len(case.cloud):>9,} {objects:>9,}  I {f1['I']:.4f}  II {f1['II']:.4f}"
+            f"  III {f1['III']:.4f}  {f1['III'] - f1['I']:+.4f}  {seconds:5.1f} s",
+            flush=True,
+        )
+        gains.setdefault(name.split()[0], []).append(f1["III"])
+    for group, values in gains.items():
+        high = sum(v >= 0.95 for v in values)
+        print(f"{group}: mean III {np.mean(values):.3f}, {high} of {len(values)} >= 0.95")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

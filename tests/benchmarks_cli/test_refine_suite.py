@@ -1,0 +1,58 @@
+"""The refinement's test-cloud suite: 58 named clouds, cached once, settings from --set."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks import refine_suite
+from benchmarks.refine_suite import Case, cases, load
+from capture.recording import Label
+from process.cloud import LabelledCloud
+from process.refine import RefineConfig
+
+
+def test_the_suite_names_fifty_eight_clouds_of_every_generator() -> None:
+    names = list(cases())
+    assert len(names) == len(set(names)) == 58
+    groups = {name.split()[0] for name in names}
+    assert groups == {"g1", "tsdf", "g2", "g3", "g4", "g5", "rec"}
+
+
+def _case(up: np.ndarray | None) -> Case:
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(50, 3)).astype(np.float32)
+    labels = rng.integers(0, 11, 50).astype(np.uint8)
+    cloud = LabelledCloud(points, np.zeros((50, 3), np.uint8), labels)
+    return Case(cloud, np.full(50, Label.CHAIR, np.uint8), up)
+
+
+@pytest.mark.parametrize("up", [None, np.array([0.0, 0.6, 0.8])])
+def test_a_cloud_is_made_once_and_read_back_whole(tmp_path: Path, up: np.ndarray | None) -> None:
+    made = []
+
+    def make() -> Case:
+        made.append(1)
+        return _case(up)
+
+    first, again = load("x y", make, tmp_path), load("x y", make, tmp_path)
+    assert len(made) == 1 and [p.name for p in tmp_path.iterdir()] == ["x_y.npz"]
+    for case in (first, again):
+        np.testing.assert_array_equal(case.cloud.points, _case(up).cloud.points)
+        np.testing.assert_array_equal(case.cloud.labels, _case(up).cloud.labels)
+        np.testing.assert_array_equal(case.truth, _case(up).truth)
+        assert (case.up is None) == (up is None)
+        if up is not None:
+            assert case.up is not None
+            np.testing.assert_allclose(case.up, up)
+
+
+def test_set_takes_the_fields_type_and_refuses_an_unknown_field() -> None:
+    cfg = RefineConfig()
+    assert refine_suite._field(cfg, "piece_vote=false") == ("piece_vote", False)
+    assert refine_suite._field(cfg, "seam_vote_m=0.05") == ("seam_vote_m", 0.05)
+    assert refine_suite._field(cfg, "min_cluster_points=12") == ("min_cluster_points", 12)
+    with pytest.raises(SystemExit, match="no field 'nope'"):
+        refine_suite._field(cfg, "nope=1")
