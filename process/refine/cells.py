@@ -130,3 +130,25 @@ def sparse_inside_others(
                 out.append(int(ids[i]))
                 break
     return np.array(out, np.int64)
+
+
+def class_cells(
+    xyz: npt.NDArray[np.float32],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    max_points: int,
+) -> tuple[
+    npt.NDArray[np.float32], npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]
+]:
+    """Return per (voxel, class) the centroid, class and first cluster, and each point's row.
+
+    The finest voxel giving at most `max_points` cells (capped_cells); the steps that build a
+    neighbour graph over all object points (seams.py, pieces.py) run on these past that size.
+    """
+    _, cell_of, _ = capped_cells(xyz, 0.0, max_points)
+    key = cell_of.astype(np.int64) * 256 + labels
+    _, first, group = np.unique(key, return_index=True, return_inverse=True)
+    group = group.reshape(-1)
+    counts = np.bincount(group).astype(np.float64)[:, None]
+    centroids = np.column_stack([np.bincount(group, weights=xyz[:, k]) for k in range(3)])
+    return (centroids / counts).astype(np.float32), labels[first], clusters[first], group

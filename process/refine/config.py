@@ -107,6 +107,9 @@ class RefineConfig:
     # point's own object lies mostly elsewhere: a label bled across a contact (seams.py); 0: off
     seam_angle_deg: float = 15.0  # ... neighbours with normals this close share a surface,
     seam_flatness: float = 0.06  # ... where both vary less than this off their local plane
+    piece_vote: bool = True  # then a face one class's label bled onto across a gap (a piece
+    # of that class at the point spacing, not its object's largest, bordered all round by one
+    # other class's larger piece, not a table's) takes that class (pieces.py)
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
@@ -146,6 +149,7 @@ class RefineConfig:
             "rejoin_own_class": False,
             "tabletop_objects": False,
             "seam_vote_m": 0.0,
+            "piece_vote": False,
             "object_bridge_m": 0.0,
             "regrow_structure": True,
         }

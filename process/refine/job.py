@@ -123,6 +123,7 @@ def refinement_metrics(
         "bare_faces_left_out": result.bare_faces,
         "faces_filled": len(result.faces_filled),
         "seam_relabelled": len(result.seams),
+        "piece_relabelled": len(result.pieces),
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS
-from process.refine.cells import capped_cells
+from process.refine.cells import class_cells
 
 NEIGHBOURS = 10  # graph edges per point
 NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface variation)
@@ -79,7 +79,7 @@ def seam_vote(
     own, ids = labels[objects], clusters[objects]
     group = np.arange(len(objects))
     if len(objects) > max_points:
-        xyz, own, ids, group = _class_cells(xyz, own, ids, max_points)
+        xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
     new = _vote(np.asarray(xyz, np.float64), own, ids, seam_m, angle_deg, flatness)[group]
     flip = new != labels[objects]
     out[objects[flip]] = new[flip]
@@ -105,24 +105,6 @@ def _vote(
         near, _ = cKDTree(xyz[own == target]).query(xyz[rows], distance_upper_bound=seam_m)
         out[rows[np.isfinite(near)]] = target
     return out
-
-
-def _class_cells(
-    xyz: npt.NDArray[np.float32],
-    labels: npt.NDArray[np.uint8],
-    clusters: npt.NDArray[np.int32],
-    max_points: int,
-) -> tuple[
-    npt.NDArray[np.float32], npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]
-]:
-    """Return per (voxel, class) the centroid, class and first cluster, and each point's row."""
-    _, cell_of, _ = capped_cells(xyz, 0.0, max_points)
-    key = cell_of.astype(np.int64) * 256 + labels
-    _, first, group = np.unique(key, return_index=True, return_inverse=True)
-    group = group.reshape(-1)
-    counts = np.bincount(group).astype(np.float64)[:, None]
-    centroids = np.column_stack([np.bincount(group, weights=xyz[:, k]) for k in range(3)])
-    return (centroids / counts).astype(np.float32), labels[first], clusters[first], group
 
 
 def _surfaces(

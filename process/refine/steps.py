@@ -18,6 +18,7 @@ from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, fill_faces
 from process.refine.outliers import sor_inliers
+from process.refine.pieces import piece_vote
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
@@ -70,6 +71,8 @@ class RefineResult:
     bare_faces: int = 0  # unlabelled points on large faces the network leaves bare (faces.py)
     faces_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices left unlabelled by regrowth on a face one class holds, given it (faces.py)
+    pieces: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of pieces that took the class of the object holding them (pieces.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -106,9 +109,9 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points the seam vote relabelled, with their new class."""
+        """Return the points the seam and piece votes relabelled, with their new class."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
-        return cloud.select(self.seams)
+        return cloud.select(np.union1d(self.seams, self.pieces))
 
     def regrown_cloud(self) -> LabelledCloud:
         """Return the points regrowth labelled, with their new class and cluster."""
@@ -210,12 +213,17 @@ def refine(
         )  # fmt: skip
         labels_iii, seams = vote.labels, vote.relabelled
         lap("seams")
+    pieces = np.zeros(0, np.intp)
+    if cfg.piece_vote:
+        held = piece_vote(cloud.points, labels_iii, clusters_iii, max_points=cfg.max_cells)
+        labels_iii, pieces = held.labels, held.relabelled
+        lap("pieces")
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams, n_faces, filled,
+        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces,
     )  # fmt: skip
 
 

@@ -1,0 +1,168 @@
+"""A face one class's label bled onto across a gap takes the class of the object it belongs to.
+
+A network's label bleeds a few centimetres across a gap onto the surface beyond it: the back of
+a seated person's torso, 4 cm in front of the chair's back, takes the chair's label whole, and
+the front of the chair's back the person's. DBSCAN's eps bridges the gap, so the bled face is
+part of the other object's cluster; the seam vote (seams.py) leaves it, its own majority being
+the wrong class. At the scale of the point spacing, though, the face is a piece of its own:
+points of one class linked within `LINK` spacings. Such a piece takes the class of the points
+it touches when:
+- it is not the largest piece of its cluster and class (an object is its largest piece; a bled
+  face hangs on it across the gap),
+- `SHARE` of its contacts (neighbours of another class) are of one class, and they are many for
+  its size (`CONTACT` times the square root of its points: along its rim, not at one spot),
+- its contacts spread over it along each of its principal axes as its points do (`ENCLOSED`):
+  a face bordered on every side, not a box whose foot stands on something,
+- the piece it touches most is at least 1 / `RATIO` times its size, and
+- neither class is table. What touches only a table is an object on it or under it (generator
+  5, fused from ray-cast views: books on desks and chairs pushed under them, 15,000 chair and
+  13,000 clutter points would have become table in 14 clouds); and a stretch of a cluttered
+  desk's top between the things on it is bordered by them all round (TUM fr1_rpy: 369 points
+  of the desk would have become clutter).
+
+Written here because no library votes over such pieces; the graph's connected components are
+SciPy's, as in seams.py.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from capture.recording import OBJECT_LABELS, Label
+from process.refine.cells import class_cells
+
+NEIGHBOURS = 10  # graph edges per point
+LINK = 2.5  # points of one class within this many point spacings are one piece
+MIN_POINTS = 25  # smaller pieces keep their class (a cup on a chair's seat)
+SHARE = 0.95  # of a piece's contacts are of the class it takes
+CONTACT = 3.0  # contacts >= CONTACT * sqrt(points of the piece)
+ENCLOSED = 0.6  # contacts' spread / the piece's spread, along each principal axis, at least
+RATIO = 0.5  # a piece at most this share of the size of the piece it touches most
+
+
+@dataclass(frozen=True)
+class PieceVote:
+    """The labels after the vote and the points it relabelled (indices into the input)."""
+
+    labels: npt.NDArray[np.uint8]
+    relabelled: npt.NDArray[np.intp]
+
+
+def piece_vote(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    *,
+    max_points: int = 400_000,
+) -> PieceVote:
+    """Relabel the pieces of one class that another class's object holds on all sides.
+
+    Args:
+        points: (N, 3) positions.
+        labels: (N,) class per point; only object classes form pieces or change.
+        clusters: (N,) cluster id per point (0: none; a piece without one is left).
+        max_points: past this many object points the vote runs on the centroids of each
+            class's points per voxel (cells.class_cells), and every point takes its
+            centroid's verdict: the graph's memory stays bounded.
+    """
+    out = labels.copy()
+    objects = np.flatnonzero(np.isin(labels, OBJECT_LABELS))
+    if len(objects) <= NEIGHBOURS or len(np.unique(labels[objects])) < 2:
+        return PieceVote(out, np.zeros(0, np.intp))
+    xyz = np.asarray(points[objects], np.float32)
+    own, ids = labels[objects], clusters[objects]
+    group = np.arange(len(objects))
+    if len(objects) > max_points:
+        xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
+    new = _vote(np.asarray(xyz, np.float64), own, ids)[group]
+    flip = new != labels[objects]
+    out[objects[flip]] = new[flip]
+    return PieceVote(out, objects[flip])
+
+
+def _vote(
+    xyz: npt.NDArray[np.float64], own: npt.NDArray[np.uint8], ids: npt.NDArray[np.int32]
+) -> npt.NDArray[np.uint8]:
+    """Return the labels after the vote, for points each of one class and one cluster."""
+    k = min(NEIGHBOURS, len(xyz) - 1)
+    dist, nb = cKDTree(xyz).query(xyz, k + 1, workers=-1)
+    link = LINK * float(np.median(dist[:, 1]))
+    i = np.repeat(np.arange(len(xyz)), k)
+    j, near = nb[:, 1:].ravel(), dist[:, 1:].ravel() < link
+    i, j = i[near], j[near]
+    same = own[i] == own[j]
+    n = len(xyz)
+    graph = coo_matrix((np.ones(int(same.sum())), (i[same], j[same])), shape=(n, n))
+    count, piece = connected_components(graph.tocsr(), directed=False)
+    size = np.bincount(piece, minlength=count)
+    cluster = _main_cluster(piece, ids, count)
+    label = np.zeros(count, np.uint8)
+    label[piece] = own
+    # the largest piece of each (cluster, class) is the object itself
+    key = cluster.astype(np.int64) * 256 + label
+    _, key_row = np.unique(key, return_inverse=True)
+    largest = np.zeros(key_row.max() + 1, np.int64)
+    np.maximum.at(largest, key_row, size)
+    main = size >= largest[key_row]
+    # contacts: edges to points of another class
+    ci, cj = i[~same], j[~same]
+    other, share, total = _top_contact(piece[ci], own[cj], count)
+    to_top = own[cj] == other[piece[ci]]
+    beside = np.zeros(count, np.int64)  # the largest piece of the top class it touches
+    np.maximum.at(beside, piece[ci][to_top], size[piece[cj][to_top]])
+    candidate = ~main & (cluster > 0) & (size >= MIN_POINTS) & (share >= SHARE)
+    candidate &= total >= CONTACT * np.sqrt(size)
+    candidate &= (size <= RATIO * beside) & (other != Label.TABLE) & (label != Label.TABLE)
+    touching = np.zeros(n, bool)
+    touching[ci[to_top]] = True
+    out = own.copy()
+    for p in np.flatnonzero(candidate):
+        rows = np.flatnonzero(piece == p)
+        if _enclosed(xyz[rows], touching[rows]):
+            out[rows] = other[p]
+    return out
+
+
+def _main_cluster(
+    piece: npt.NDArray[np.int32], ids: npt.NDArray[np.int32], count: int
+) -> npt.NDArray[np.int64]:
+    """Return per piece the cluster that holds most of its points."""
+    pairs, n = np.unique(piece.astype(np.int64) * (int(ids.max()) + 1) + ids, return_counts=True)
+    of_piece, cluster = pairs // (int(ids.max()) + 1), pairs % (int(ids.max()) + 1)
+    order = np.lexsort((-n, of_piece))
+    first = order[np.unique(of_piece[order], return_index=True)[1]]
+    out = np.zeros(count, np.int64)
+    out[of_piece[first]] = cluster[first]
+    return out
+
+
+def _top_contact(
+    piece: npt.NDArray[np.int32], label: npt.NDArray[np.uint8], count: int
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """Return per piece its most touched class, that class's share of its contacts, and all."""
+    total = np.bincount(piece, minlength=count)
+    other, share = np.zeros(count, np.uint8), np.zeros(count)
+    if len(piece) == 0:
+        return other, share, total
+    pairs, n = np.unique(piece.astype(np.int64) * 256 + label, return_counts=True)
+    of_piece = pairs // 256
+    order = np.lexsort((-n, of_piece))
+    first = order[np.unique(of_piece[order], return_index=True)[1]]
+    other[of_piece[first]] = pairs[first] % 256
+    share[of_piece[first]] = n[first] / total[of_piece[first]]
+    return other, share, total
+
+
+def _enclosed(xyz: npt.NDArray[np.float64], touching: npt.NDArray[np.bool_]) -> bool:
+    """Return whether the touching points spread along each principal axis as the piece does."""
+    centred = xyz - xyz.mean(axis=0)
+    _, axes = np.linalg.eigh(np.cov(centred.T))
+    spread = (centred @ axes).std(axis=0)
+    rim = (centred[touching] @ axes).std(axis=0)
+    return bool(np.all(rim >= ENCLOSED * np.maximum(spread, 1e-9)))

@@ -1,0 +1,148 @@
+"""The piece vote: a face a label bled onto across a gap goes back to the object holding it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from helpers_refine import grid_patch, labelled
+
+import process.refine.pieces as pieces
+from capture.recording import Label
+from process.refine import RefineConfig, refine
+from process.refine.job import refinement_metrics
+from process.refine.pieces import piece_vote
+
+CHAIR, PERSON, SOFA, CLUTTER, TABLE = (
+    Label.CHAIR, Label.PERSON, Label.SOFA, Label.CLUTTER, Label.TABLE,
+)  # fmt: skip
+STEP = 0.01
+
+Points = npt.NDArray[np.float64]
+
+
+def _box(low: tuple[float, float, float], high: tuple[float, float, float]) -> list[Points]:
+    """Return the six faces of a box at STEP: -x, +x, -y, +y, -z, +z."""
+    faces = []
+    for axis in range(3):
+        a, b = (k for k in range(3) if k != axis)
+        grid = grid_patch((low[a], high[a]), (low[b], high[b]), step=STEP)
+        for side in (low[axis], high[axis]):
+            face = np.zeros((len(grid), 3))
+            face[:, a], face[:, b], face[:, axis] = grid[:, 0], grid[:, 1], side
+            faces.append(face)
+    return faces
+
+
+def _seated_back(
+    seed: int = 0,
+) -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.bool_], int]:
+    """A person's torso (a box 22 x 38 x 60 cm) 4 cm before a chair's back (4 cm thick).
+
+    The chair's label bled across the gap onto the torso's whole back face, and DBSCAN's eps
+    bridged it: the face is in the chair's cluster (1). Returns points, labels, clusters, the
+    mask of the torso's back face and how many points the chair's back has (first).
+    """
+    chair = np.vstack(_box((-0.24, 0.0, 0.5), (-0.20, 0.44, 0.92)))
+    torso = _box((-0.16, 0.03, 0.5), (0.06, 0.41, 1.1))
+    back, rest = torso[0], np.vstack(torso[1:])
+    points = np.vstack([chair, back, rest])
+    points += np.random.default_rng(seed).normal(0.0, 0.002, points.shape)
+    labels = np.concatenate(
+        [np.full(len(chair) + len(back), CHAIR), np.full(len(rest), PERSON)]
+    ).astype(np.uint8)
+    clusters = np.concatenate([np.full(len(chair) + len(back), 1), np.full(len(rest), 2)]).astype(
+        np.int32
+    )
+    is_back = np.zeros(len(points), bool)
+    is_back[len(chair) : len(chair) + len(back)] = True
+    return points, labels, clusters, is_back, len(chair)
+
+
+def test_a_torsos_back_the_chairs_label_bled_onto_goes_back_to_the_person() -> None:
+    points, labels, clusters, back, n_chair = _seated_back()
+    vote = piece_vote(points, labels, clusters)
+    assert back.sum() > 2000
+    assert (vote.labels[back] == PERSON).mean() > 0.95
+    assert (vote.labels[:n_chair] == CHAIR).all()  # the chair's back is the chair's object
+    assert set(vote.relabelled.tolist()) == set(np.flatnonzero(labels != vote.labels).tolist())
+
+
+def test_a_piece_that_is_its_objects_largest_stays() -> None:
+    """The same face in a cluster of its own is an object (a cushion on a sofa's back)."""
+    points, labels, clusters, back, _ = _seated_back()
+    clusters[back] = 3
+    assert (piece_vote(points, labels, clusters).labels == labels).all()
+
+
+def test_past_max_points_the_vote_runs_on_class_cells_with_the_same_verdict() -> None:
+    """On half as many cells (1.6 cm voxels) the 4 cm gap still parts the pieces; on 1.8 cm
+    ones LINK spacings bridge it and the face stays: the vote sees gaps of 2.5 cells."""
+    points, labels, clusters, back, n_chair = _seated_back(seed=1)
+    vote = piece_vote(points, labels, clusters, max_points=len(points) // 2)
+    assert (vote.labels[back] == PERSON).mean() > 0.9
+    assert (vote.labels[:n_chair] == CHAIR).all()
+    coarse = piece_vote(points, labels, clusters, max_points=int(len(points) * 0.4))
+    assert (coarse.labels[back] == CHAIR).all()
+
+
+def _box_on_a_seat(label: int) -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32]]:
+    """A box (`label`) standing on a sofa's seat; a larger box of its class 10 cm beside it is
+    its cluster's largest piece (DBSCAN joined the two)."""
+    seat = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.45, step=STEP).astype(np.float64)
+    small = np.vstack(_box((0.2, 0.2, 0.45), (0.4, 0.4, 0.6))[:4] + _box(
+        (0.2, 0.2, 0.45), (0.4, 0.4, 0.6))[5:])  # fmt: skip
+    large = np.vstack(_box((0.5, 0.2, 0.45), (0.9, 0.6, 0.75))[:4] + _box(
+        (0.5, 0.2, 0.45), (0.9, 0.6, 0.75))[5:])  # fmt: skip
+    keep = ~(
+        ((seat[:, 0] > 0.2) & (seat[:, 0] < 0.4) & (seat[:, 1] > 0.2) & (seat[:, 1] < 0.4))
+        | ((seat[:, 0] > 0.5) & (seat[:, 0] < 0.9) & (seat[:, 1] > 0.2) & (seat[:, 1] < 0.6))
+    )
+    seat = seat[keep]  # hidden under the boxes
+    points = np.vstack([seat, small, large])
+    points += np.random.default_rng(2).normal(0.0, 0.002, points.shape)
+    labels = np.concatenate([np.full(len(seat), SOFA), np.full(len(small) + len(large), label)])
+    clusters = np.concatenate([np.full(len(seat), 1), np.full(len(small) + len(large), 2)])
+    return points, labels.astype(np.uint8), clusters.astype(np.int32)
+
+
+def test_a_box_standing_on_a_seat_is_not_bordered_all_round(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Its contacts lie along its foot, not up its sides: it stays itself."""
+    points, labels, clusters = _box_on_a_seat(CLUTTER)
+    assert (piece_vote(points, labels, clusters).labels == labels).all()
+    monkeypatch.setattr(pieces, "ENCLOSED", 0.0)  # the enclosure test is what keeps it
+    assert (piece_vote(points, labels, clusters).labels[labels == CLUTTER] == SOFA).any()
+
+
+def test_a_table_neither_takes_nor_gives_pieces() -> None:
+    """A box on a desk touches only the desk; a stretch of a desk between the things on it is
+    bordered by them: both stay (TUM fr1_rpy: 369 desk points would have become clutter)."""
+    points, labels, clusters = _box_on_a_seat(CLUTTER)
+    seat = labels == SOFA
+    labels[seat] = TABLE
+    assert (piece_vote(points, labels, clusters).labels == labels).all()
+    torso_points, torso_labels, torso_clusters, back, _ = _seated_back()
+    torso_labels[torso_labels == CHAIR] = TABLE
+    vote = piece_vote(torso_points, torso_labels, torso_clusters)
+    assert (vote.labels[back] == TABLE).all()
+
+
+def test_refine_gives_the_torsos_back_to_the_person() -> None:
+    """Through refine (planes, SOR, DBSCAN, regrowth, seams), in a room with a floor."""
+    points, labels, _, back, _ = _seated_back()
+    floor = grid_patch((-1.0, 1.0), (-1.0, 1.5))
+    cloud = labelled(np.vstack([floor, points]), np.r_[np.full(len(floor), Label.FLOOR), labels])
+    cfg = RefineConfig(plane_min_points=1500, plane_max_remaining=100)
+    up = np.array([0.0, 0.0, 1.0])
+    at = len(floor)
+    out = refine(cloud, cfg, up=up)
+    assert (out.labels_iii[at:][back] == PERSON).mean() > 0.9
+    assert refinement_metrics(out, gt_cloud=None)["points"]["piece_relabelled"] > 2000
+    assert len(out.seam_cloud()) >= len(out.pieces)  # shown with the seams in the .rrd
+    off = refine(cloud, dataclasses.replace(cfg, piece_vote=False), up=up)
+    assert (off.labels_iii[at:][back] == CHAIR).mean() > 0.9
+    assert not RefineConfig.paper().piece_vote
