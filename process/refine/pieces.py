@@ -60,6 +60,7 @@ def piece_vote(
     clusters: npt.NDArray[np.int32],
     *,
     max_points: int = 400_000,
+    neighbours: tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]] | None = None,
 ) -> PieceVote:
     """Relabel the pieces of one class that another class's object holds on all sides.
 
@@ -70,6 +71,9 @@ def piece_vote(
         max_points: past this many object points the vote runs on the centroids of each
             class's points per voxel (cells.class_cells), and every point takes its
             centroid's verdict: the graph's memory stays bounded.
+        neighbours: the object points' nearest (distances, indices, NEIGHBOURS + 1 or more
+            columns, itself first) in the order of their indices, if already at hand (the seam
+            vote's, seams.SeamVote): used when the vote runs on the points, not on cells.
     """
     out = labels.copy()
     objects = np.flatnonzero(np.isin(labels, OBJECT_LABELS))
@@ -80,18 +84,30 @@ def piece_vote(
     group = np.arange(len(objects))
     if len(objects) > max_points:
         xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
-    new = _vote(np.asarray(xyz, np.float64), own, ids)[group]
+        neighbours = None
+    xyz64 = np.asarray(xyz, np.float64)
+    k = min(NEIGHBOURS, len(xyz64) - 1)
+    if neighbours is None or len(neighbours[0]) != len(xyz64) or neighbours[0].shape[1] <= k:
+        neighbours = cKDTree(xyz64).query(xyz64, k + 1, workers=-1)
+    dist, nb = neighbours[0][:, : k + 1], neighbours[1][:, : k + 1]
+    new = _vote(xyz64, own, ids, dist, nb)[group]
     flip = new != labels[objects]
     out[objects[flip]] = new[flip]
     return PieceVote(out, objects[flip])
 
 
 def _vote(
-    xyz: npt.NDArray[np.float64], own: npt.NDArray[np.uint8], ids: npt.NDArray[np.int32]
+    xyz: npt.NDArray[np.float64],
+    own: npt.NDArray[np.uint8],
+    ids: npt.NDArray[np.int32],
+    dist: npt.NDArray[np.float64],
+    nb: npt.NDArray[np.intp],
 ) -> npt.NDArray[np.uint8]:
-    """Return the labels after the vote, for points each of one class and one cluster."""
-    k = min(NEIGHBOURS, len(xyz) - 1)
-    dist, nb = cKDTree(xyz).query(xyz, k + 1, workers=-1)
+    """Return the labels after the vote, for points each of one class and one cluster.
+
+    `dist` and `nb` hold each point's nearest neighbours, itself first.
+    """
+    k = nb.shape[1] - 1
     link = LINK * float(np.median(dist[:, 1]))
     i = np.repeat(np.arange(len(xyz)), k)
     j, near = nb[:, 1:].ravel(), dist[:, 1:].ravel() < link

@@ -43,6 +43,10 @@ class SeamVote:
 
     labels: npt.NDArray[np.uint8]
     relabelled: npt.NDArray[np.intp]
+    # the object points' NEIGHBOURS + 1 nearest (distances, indices), in the order of
+    # np.flatnonzero(np.isin(labels, OBJECT_LABELS)); None when the vote ran on cells or not
+    # at all. The vote changes only object classes, so the piece vote reuses them (pieces.py).
+    neighbours: tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]] | None = None
 
 
 def seam_vote(
@@ -78,24 +82,28 @@ def seam_vote(
     xyz = np.asarray(points[objects], np.float32)
     own, ids = labels[objects], clusters[objects]
     group = np.arange(len(objects))
-    if len(objects) > max_points:
+    capped = len(objects) > max_points
+    if capped:
         xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
-    new = _vote(np.asarray(xyz, np.float64), own, ids, seam_m, angle_deg, flatness)[group]
+    xyz64 = np.asarray(xyz, np.float64)
+    neighbours = cKDTree(xyz64).query(xyz64, NEIGHBOURS + 1, workers=-1)
+    new = _vote(xyz64, own, ids, neighbours, seam_m, angle_deg, flatness)[group]
     flip = new != labels[objects]
     out[objects[flip]] = new[flip]
-    return SeamVote(out, objects[flip])
+    return SeamVote(out, objects[flip], None if capped else neighbours)
 
 
 def _vote(
     xyz: npt.NDArray[np.float64],
     own: npt.NDArray[np.uint8],
     ids: npt.NDArray[np.int32],
+    neighbours: tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]],
     seam_m: float,
     angle_deg: float,
     flatness: float,
 ) -> npt.NDArray[np.uint8]:
     """Return the labels after the vote, for points each of one class and one cluster."""
-    surface = _surfaces(xyz, angle_deg=angle_deg, flatness=flatness)
+    surface = _surfaces(xyz, neighbours, angle_deg=angle_deg, flatness=flatness)
     major, share, size = _majority(surface, own)
     candidate = (own != major[surface]) & (share[surface] >= MAJORITY)
     candidate &= (size[surface] >= MIN_SURFACE) & (_on_surface_share(ids, surface) < FRINGE)
@@ -108,7 +116,11 @@ def _vote(
 
 
 def _surfaces(
-    xyz: npt.NDArray[np.float64], *, angle_deg: float, flatness: float
+    xyz: npt.NDArray[np.float64],
+    neighbours: tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]],
+    *,
+    angle_deg: float,
+    flatness: float,
 ) -> npt.NDArray[np.int32]:
     """Return a smooth-surface id per point: components of the flat, coplanar-neighbour graph."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
@@ -116,7 +128,7 @@ def _surfaces(
     values, vectors = np.linalg.eigh(np.asarray(cloud.covariances))
     normals = vectors[:, :, 0]  # the direction of least spread
     flat = values[:, 0] / np.maximum(values.sum(axis=1), 1e-18) < flatness
-    dist, nb = cKDTree(xyz).query(xyz, NEIGHBOURS + 1, workers=-1)
+    dist, nb = neighbours  # each point's NEIGHBOURS + 1 nearest, itself first
     spacing = float(np.median(dist[:, 1]))
     i = np.repeat(np.arange(len(xyz)), NEIGHBOURS)
     j, d = nb[:, 1:].ravel(), dist[:, 1:].ravel()

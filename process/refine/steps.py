@@ -206,16 +206,20 @@ def refine(
         regrown = np.union1d(regrown, filled)  # shown with the regrown points in the .rrd
     lap("regrowth")
     seams = np.zeros(0, np.intp)
+    neighbours = None
     if cfg.seam_vote_m > 0:
         vote = seam_vote(
             cloud.points, labels_iii, clusters_iii, seam_m=cfg.seam_vote_m,
             angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness, max_points=cfg.max_cells,
         )  # fmt: skip
-        labels_iii, seams = vote.labels, vote.relabelled
+        labels_iii, seams, neighbours = vote.labels, vote.relabelled, vote.neighbours
         lap("seams")
     pieces = np.zeros(0, np.intp)
     if cfg.piece_vote:
-        held = piece_vote(cloud.points, labels_iii, clusters_iii, max_points=cfg.max_cells)
+        held = piece_vote(
+            cloud.points, labels_iii, clusters_iii, max_points=cfg.max_cells,
+            neighbours=neighbours,
+        )  # fmt: skip
         labels_iii, pieces = held.labels, held.relabelled
         lap("pieces")
     seconds["total"] = time.perf_counter() - start
