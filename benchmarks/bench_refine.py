@@ -113,10 +113,7 @@ def _generator_rows() -> list[Row]:
             t0 = time.perf_counter()
             result = refine(scene.cloud, cfg, up=scene.up)
             seconds = time.perf_counter() - t0
-            f1 = {
-                p: label_metrics(c.labels, scene.truth)["all"]["f1"]
-                for p, c in result.phase_clouds().items()
-            }
+            f1 = result.phase_f1(scene.truth)
             n, objects = len(scene.cloud), int((scene.truth >= 4).sum())
             label = f"{name} ({n:,} pts, {objects:,} on objects){rule}"
             rows.append(

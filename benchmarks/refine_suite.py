@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from process.cloud import LabelledCloud
+from process.errors import ConfigError
 
 CACHE: Final = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "semreplay-suite"
 TESTS: Final = Path(__file__).resolve().parents[1] / "tests"
@@ -164,21 +165,27 @@ def load(name: str, make: Callable[[], Case], cache: Path) -> Case:
         return Case(cloud, z["truth"], up)
 
 
+_BOOLS: Final = {"true": True, "1": True, "yes": True, "on": True, "false": False, "0": False}
+
+
 def _field(cfg: object, text: str) -> tuple[str, Any]:
     """Return (name, value) of a FIELD=VALUE, the value of the field's type."""
     name, _, value = text.partition("=")
     if not hasattr(cfg, name):
         raise SystemExit(f"--set: RefineConfig has no field {name!r}; see process/refine/config.py")
     current = getattr(cfg, name)
-    if isinstance(current, bool):
-        return name, value.lower() in ("1", "true", "yes", "on")
-    if isinstance(current, tuple):
-        return name, tuple(float(v) for v in value.split(","))
-    return name, type(current)(value)
+    try:
+        if isinstance(current, bool):
+            return name, _BOOLS[value.lower()]
+        if isinstance(current, tuple):
+            return name, tuple(float(v) for v in value.split(","))
+        return name, type(current)(value)
+    except (KeyError, ValueError):
+        kind = "true or false" if isinstance(current, bool) else type(current).__name__
+        raise SystemExit(f"--set: {name} expects {kind} (now {current!r}); got {value!r}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
-    from process.evaluate import label_metrics
     from process.refine import RefineConfig, refine
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.refine_suite")
@@ -189,7 +196,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
     args = parser.parse_args(argv)
     cfg = RefineConfig.paper() if args.paper else RefineConfig()
-    cfg = dataclasses.replace(cfg, **dict(_field(cfg, text) for text in args.set))
+    try:
+        cfg = dataclasses.replace(cfg, **dict(_field(cfg, text) for text in args.set))
+    except ConfigError as err:
+        raise SystemExit(f"--set: {err}") from None
     gains: dict[str, list[float]] = {}
     for name, make in cases().items():
         if args.only not in name:
@@ -201,10 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         result = refine(case.cloud, cfg, up=case.up)
         seconds = time.perf_counter() - t0
-        f1 = {
-            p: label_metrics(c.labels, case.truth)["all"]["f1"]
-            for p, c in result.phase_clouds().items()
-        }
+        f1 = result.phase_f1(case.truth)
         objects = int((case.truth >= 4).sum())
         print(
             f"{name:24s} {len(case.cloud):>9,} {objects:>9,}  I {f1['I']:.4f}  II {f1['II']:.4f}"

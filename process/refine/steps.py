@@ -13,6 +13,7 @@ import numpy.typing as npt
 from capture.recording import NUM_LABELS, OBJECT_LABELS, STRUCTURAL_LABELS, Label
 from process.cloud import LabelledCloud
 from process.errors import StageError
+from process.evaluate import label_metrics
 from process.refine.cells import attached_clusters, capped_cells, sparse_inside_others
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
@@ -92,6 +93,16 @@ class RefineResult:
             "I": self.fused,
             "II": self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii),
             "III": self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii),
+        }
+
+    def phase_f1(self, truth: npt.NDArray[np.uint8]) -> dict[str, float]:
+        """Return F1 over the object classes per phase ("I", "II", "III").
+
+        `truth` holds a RECORDING.md label per input point, as the test-cloud generators give.
+        """
+        return {
+            phase: label_metrics(cloud.labels, truth)["all"]["f1"]
+            for phase, cloud in self.phase_clouds().items()
         }
 
     def plane_cloud(self) -> LabelledCloud:

@@ -56,3 +56,12 @@ def test_set_takes_the_fields_type_and_refuses_an_unknown_field() -> None:
     assert refine_suite._field(cfg, "min_cluster_points=12") == ("min_cluster_points", 12)
     with pytest.raises(SystemExit, match="no field 'nope'"):
         refine_suite._field(cfg, "nope=1")
+    with pytest.raises(SystemExit, match=r"seam_vote_m expects float .* got 'abc'"):
+        refine_suite._field(cfg, "seam_vote_m=abc")
+    with pytest.raises(SystemExit, match=r"piece_vote expects true or false .* got 'flase'"):
+        refine_suite._field(cfg, "piece_vote=flase")
+
+
+def test_set_out_of_range_is_a_one_line_error() -> None:
+    with pytest.raises(SystemExit, match=r"--set: refinement.seam_vote_m must be in 0.0..1.0"):
+        refine_suite.main(["--set", "seam_vote_m=-1", "--only", "no such cloud"])
