@@ -146,3 +146,18 @@ def test_refine_gives_the_torsos_back_to_the_person() -> None:
     off = refine(cloud, dataclasses.replace(cfg, piece_vote=False), up=up)
     assert (off.labels_iii[at:][back] == CHAIR).mean() > 0.9
     assert not RefineConfig.paper().piece_vote
+
+
+def test_neighbours_handed_in_give_the_same_verdict_and_a_mismatch_is_not_used() -> None:
+    """The seam vote's nearest neighbours of the object points (seams.SeamVote) are reused."""
+    from scipy.spatial import cKDTree
+
+    points, labels, clusters, back, _ = _seated_back()
+    own = np.flatnonzero(np.isin(labels, (CHAIR, PERSON)))
+    xyz = points[own].astype(np.float32).astype(np.float64)
+    neighbours = cKDTree(xyz).query(xyz, pieces.NEIGHBOURS + 1)
+    alone = piece_vote(points, labels, clusters)
+    given = piece_vote(points, labels, clusters, neighbours=neighbours)
+    assert (given.labels == alone.labels).all() and (alone.labels[back] == PERSON).mean() > 0.95
+    short = (neighbours[0][:10], neighbours[1][:10])  # of other points: computed afresh
+    assert (piece_vote(points, labels, clusters, neighbours=short).labels == alone.labels).all()
