@@ -75,7 +75,7 @@ class OdometryConfig:
     dense_refine_all_frames: bool = True  # ... and every other frame, with the short schedule
     dense_method: str = "auto"  # "auto" | "point_to_plane" | "hybrid" | "intensity"
     dense_scale: int = 2  # dense alignment on images downsampled by this factor
-    dense_iterations: tuple[int, ...] = (10, 5, 3)  # keyframes: per pyramid level, finest first
+    dense_iterations: tuple[int, ...] = (10, 5, 3)  # keyframes: per pyramid level, coarsest first
     dense_frame_iterations: tuple[int, ...] = (3,)  # other frames: start from PnP, finest only
     # sum the dense alignment on one thread, so that a recording gives the same trajectory and
     # map every run (dense.one_thread; TUM fr1_rpy whole job 3-5 % slower); false: all threads

@@ -11,7 +11,7 @@ is smooth, hybrid elsewhere.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from typing import Any
@@ -131,25 +131,166 @@ class DenseAligner:
             well_posed = min(source.conditioning, target.conditioning) >= _MIN_CONDITIONING
             exact = max(source.roughness, target.roughness) <= _MAX_ROUGHNESS
             method = "point_to_plane" if well_posed and exact else "hybrid"
+        criteria = self.quick_criteria if quick else self.criteria
+        init = np.array(init_target_from_source, np.float64)
         try:
             # see one_thread: Open3D's parallel sums vary in the last bits
             with one_thread() if self.reproducible else nullcontext():
-                result = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
-                    source.rgbd,
-                    target.rgbd,
-                    self.camera_matrix,
-                    o3d.core.Tensor.from_numpy(np.array(init_target_from_source, np.float64)),
-                    1.0,
-                    self.max_depth_m,
-                    self.quick_criteria if quick else self.criteria,
-                    _METHODS[method],
-                )
+                if method == "point_to_plane":
+                    result = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
+                        source.rgbd,
+                        target.rgbd,
+                        self.camera_matrix,
+                        o3d.core.Tensor.from_numpy(init),
+                        1.0,
+                        self.max_depth_m,
+                        criteria,
+                        _METHODS[method],
+                    )
+                    transform, fitness = result.transformation.numpy(), result.fitness
+                else:
+                    transform, fitness = photometric_multi_scale(
+                        method, source, target, self.k_small, init, self.max_depth_m, criteria
+                    )
         except RuntimeError:
             return None  # Open3D raises when too few pixels correspond
-        transform = np.asarray(result.transformation.numpy(), np.float64)
+        transform = np.asarray(transform, np.float64)
         if not np.all(np.isfinite(transform)):
             return None
-        return DenseResult(transform, float(result.fitness), method)
+        return DenseResult(transform, float(fitness), method)
+
+
+# Open3D's loss parameters (OdometryLossParams' defaults, which rgbd_odometry_multi_scale uses)
+_LOSS = o3d.t.pipelines.odometry.OdometryLossParams()
+# the 5-tap binomial weights of Open3D's PyrDownDepth
+_BINOMIAL = np.array([0.0625, 0.25, 0.375, 0.25, 0.0625], np.float32)
+
+
+def photometric_multi_scale(
+    method: str,
+    source: DenseImage,
+    target: DenseImage,
+    camera_matrix: npt.NDArray[np.float64],
+    init_target_from_source: npt.NDArray[np.float64],
+    max_depth_m: float,
+    criteria: Sequence[Any],
+) -> tuple[npt.NDArray[np.float64], float]:
+    """Return (target_from_source, fitness) by Open3D's multi-scale "intensity" or "hybrid".
+
+    Open3D 0.20's rgbd_odometry_multi_scale builds the intensity pyramid with its Gaussian
+    filter (IPP), whose result depends on whether the image's buffer starts on an 8-byte
+    boundary (measured: two outputs, by address mod 8): the same two images gave poses 1e-7 m
+    apart from one call to the next, and two runs of a recording differed. This builds the same
+    pyramids with OpenCV and NumPy, whose results follow the pixels alone, and runs Open3D's own
+    Gauss-Newton step per iteration with its convergence test: poses within 2e-5 m of Open3D's
+    (the Gaussian weights differ in the last bits), at the same cost. Raises RuntimeError where
+    no pixel corresponds, as Open3D does. criteria: OdometryConvergenceCriteria per level,
+    coarsest first.
+    """
+    trunc = _LOSS.depth_outlier_trunc
+    levels = len(criteria)
+    k = np.array(camera_matrix, np.float64)
+    source_depth, target_depth = (_clip_depth(im, max_depth_m) for im in (source, target))
+    source_gray, target_gray = (_gray(im) for im in (source, target))
+    pyramid = []
+    for level in range(levels):
+        images = [source_depth, target_depth, source_gray, target_gray]
+        if method == "hybrid":
+            images += _sobel(target_depth)
+        images += _sobel(target_gray)
+        vertices = o3d.t.geometry.Image(_tensor(source_depth)).create_vertex_map(
+            o3d.core.Tensor.from_numpy(k), float("nan")
+        )
+        pyramid.append(
+            [_tensor(a) for a in images]
+            + [vertices.as_tensor(), o3d.core.Tensor.from_numpy(k.copy())]
+        )
+        if level < levels - 1:
+            source_depth = pyrdown_depth(source_depth, 2 * trunc)
+            target_depth = pyrdown_depth(target_depth, 2 * trunc)
+            source_gray, target_gray = gaussian_pyrdown(source_gray), gaussian_pyrdown(target_gray)
+            k = k / 2
+            k[2, 2] = 1.0
+    odometry = o3d.t.pipelines.odometry
+    step_fn: Any = (
+        odometry.compute_odometry_result_hybrid
+        if method == "hybrid"
+        else odometry.compute_odometry_result_intensity
+    )
+    loss: tuple[float, ...] = (
+        (trunc, _LOSS.depth_huber_delta, _LOSS.intensity_huber_delta)
+        if method == "hybrid"
+        else (trunc, _LOSS.intensity_huber_delta)
+    )
+    transform = np.array(init_target_from_source, np.float64)
+    rmse, fitness = 0.0, 1.0
+    for level_images, criterion in zip(reversed(pyramid), criteria, strict=True):
+        for _ in range(criterion.max_iteration):
+            step = step_fn(*level_images, o3d.core.Tensor.from_numpy(transform), *loss)
+            transform = step.transformation.numpy() @ transform
+            # Open3D's test; against rmse 0 at the start it divides by zero: never converged
+            if (
+                rmse > 0
+                and abs(fitness - step.fitness) / fitness < criterion.relative_fitness
+                and abs(rmse - step.inlier_rmse) / rmse < criterion.relative_rmse
+            ):
+                break
+            rmse, fitness = step.inlier_rmse, step.fitness
+    return transform, fitness
+
+
+def _clip_depth(image: DenseImage, max_depth_m: float) -> npt.NDArray[np.float32]:
+    depth = image.rgbd.depth.as_tensor().numpy()[:, :, 0]
+    return np.where((depth > 0) & (depth < max_depth_m), depth, np.nan).astype(np.float32)
+
+
+def _gray(image: DenseImage) -> npt.NDArray[np.float32]:
+    gray = image.rgbd.color.rgb_to_gray().as_tensor().numpy()
+    return np.ascontiguousarray(gray[:, :, 0], dtype=np.float32)
+
+
+def _tensor(a: npt.NDArray[np.float32]) -> Any:
+    return o3d.core.Tensor.from_numpy(np.ascontiguousarray(a[:, :, None]))
+
+
+def _sobel(a: npt.NDArray[np.float32]) -> list[npt.NDArray[np.float32]]:
+    """Return the 3x3 Sobel x and y derivatives, edges replicated (Open3D's FilterSobel)."""
+    return [
+        np.asarray(
+            cv2.Sobel(a, cv2.CV_32F, dx, 1 - dx, ksize=3, borderType=cv2.BORDER_REPLICATE),
+            np.float32,
+        )
+        for dx in (1, 0)
+    ]
+
+
+def gaussian_pyrdown(a: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """Return Open3D's PyrDown: a 5x5 Gaussian of sigma 1, edges replicated, every other pixel."""
+    h, w = a.shape[0] // 2 * 2, a.shape[1] // 2 * 2
+    smooth = cv2.GaussianBlur(a, (5, 5), 1.0, borderType=cv2.BORDER_REPLICATE)
+    return np.ascontiguousarray(smooth[:h:2, :w:2])
+
+
+def pyrdown_depth(depth: npt.NDArray[np.float32], max_diff: float) -> npt.NDArray[np.float32]:
+    """Return Open3D's PyrDownDepth (not exposed to Python, hence by hand).
+
+    Every other pixel: the binomial 5x5 mean of its neighbours within max_diff of it, NaN where
+    it is NaN; neighbours that are NaN or off the image are left out.
+    """
+    h, w = depth.shape[0] // 2, depth.shape[1] // 2
+    padded = np.pad(depth, 2, constant_values=np.nan)
+    filled = np.nan_to_num(padded)  # a neighbour left out adds w * 0: the same float sums
+    centre = depth[: 2 * h : 2, : 2 * w : 2]
+    total = np.zeros((h, w), np.float32)
+    weight = np.zeros((h, w), np.float32)
+    for dy in range(5):
+        for dx in range(5):
+            near = np.abs(padded[dy : dy + 2 * h : 2, dx : dx + 2 * w : 2] - centre) < max_diff
+            w_ij = _BINOMIAL[dy] * _BINOMIAL[dx]
+            total += w_ij * filled[dy : dy + 2 * h : 2, dx : dx + 2 * w : 2] * near
+            weight += w_ij * near
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(weight > 0, total / weight, np.nan).astype(np.float32)
 
 
 @contextmanager

@@ -80,8 +80,16 @@ def test_the_canonical_order_sorts_by_x_then_y_then_z() -> None:
 
 @pytest.mark.usefixtures("open3d_threads")
 @pytest.mark.parametrize("reproducible", [True, False])
+@pytest.mark.parametrize(
+    ("method", "kernel"),
+    [
+        ("point_to_plane", "rgbd_odometry_multi_scale"),
+        ("hybrid", "compute_odometry_result_hybrid"),
+        ("intensity", "compute_odometry_result_intensity"),
+    ],
+)
 def test_the_dense_alignment_sums_on_one_thread_only_when_reproducible(
-    monkeypatch: pytest.MonkeyPatch, reproducible: bool
+    monkeypatch: pytest.MonkeyPatch, reproducible: bool, method: str, kernel: str
 ) -> None:
     from helpers_odometry import K_QVGA
 
@@ -94,9 +102,9 @@ def test_the_dense_alignment_sums_on_one_thread_only_when_reproducible(
         seen.append(o3d.utility.get_max_threads())
         raise RuntimeError("too few correspondences")  # align then gives up: None
 
-    monkeypatch.setattr(o3d.t.pipelines.odometry, "rgbd_odometry_multi_scale", spy)
+    monkeypatch.setattr(o3d.t.pipelines.odometry, kernel, spy)
     aligner = DenseAligner(
-        K_QVGA, scale=2, max_depth_m=4.0, iterations=(3,), reproducible=reproducible
+        K_QVGA, scale=2, max_depth_m=4.0, iterations=(3,), method=method, reproducible=reproducible
     )
     rng = np.random.default_rng(0)
     gray = rng.integers(0, 255, (240, 320), dtype=np.uint8)
