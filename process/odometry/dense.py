@@ -6,7 +6,8 @@ plane is blind along any direction the surfaces do not constrain, though (a came
 wall, or a room corner): it then slides; and on noisy depth (a D435 beyond ~1.5 m) hybrid is the
 more accurate. "auto" therefore measures how well the surface normals of both images span 3-D and
 how rough their depth is, and uses point-to-plane only where the normals span 3-D and the depth
-is smooth, hybrid elsewhere.
+is smooth, hybrid elsewhere. The photometric methods run Open3D's per-iteration kernels on
+pyramids built here (photometric_multi_scale: Open3D's own pyramid varied with buffer addresses).
 """
 
 from __future__ import annotations
