@@ -18,6 +18,7 @@ from process.refine.cells import attached_clusters, capped_cells, sparse_inside_
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, fill_faces
+from process.refine.orphans import adopt_orphans
 from process.refine.outliers import sor_inliers
 from process.refine.pieces import piece_vote
 from process.refine.planes import PlaneSegmentation, segment_planes
@@ -74,6 +75,8 @@ class RefineResult:
     # input indices left unlabelled by regrowth on a face one class holds, given it (faces.py)
     pieces: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of pieces that took the class of the object holding them (pieces.py)
+    orphans: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of unlabelled segments the network saw, given the class they touch (orphans.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -163,7 +166,7 @@ def refine(
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
-    filled = np.zeros(0, np.intp)
+    filled = orphans = np.zeros(0, np.intp)
     tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -215,6 +218,11 @@ def refine(
             cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
         )
         regrown = np.union1d(regrown, filled)  # shown with the regrown points in the .rrd
+        if cfg.orphan_adoption:  # what the network saw and phase II left unlabelled
+            labels_iii, clusters_iii, orphans = adopt_orphans(
+                cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels
+            )
+            regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
     lap("regrowth")
     seams = np.zeros(0, np.intp)
     neighbours = None
@@ -238,7 +246,7 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces,
+        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans,
     )  # fmt: skip
 
 
