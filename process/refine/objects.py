@@ -16,10 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from capture.recording import Label
+from process.refine.graph import components
 
 Boxes = npt.NDArray[np.float64]  # (C, 3) per cluster, lower or upper corner
 
@@ -49,9 +48,7 @@ def group_objects(
     pairs = _near(label, low, high, gap_m)
     if bridge_m > gap_m and r1 is not None:
         pairs = np.concatenate([pairs, _bridged(label, low, high, r1, bridge_m, patch_max_m)])
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(label),) * 2)
-    objects: npt.NDArray[np.int64] = connected_components(graph, directed=False)[1].astype(np.int64)
-    return objects
+    return components(len(label), pairs[:, 0], pairs[:, 1])[1].astype(np.int64)
 
 
 def _near(

@@ -16,18 +16,17 @@ spacings), and a segment takes the class of the objects it touches when:
 The segment joins the cluster its contacts touch most; its points count as regrown.
 
 Written here because no library adopts segments by contact; the graph's connected components
-are SciPy's, as in seams.py and pieces.py.
+are SciPy's (graph.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
+from process.refine.graph import components, knn_edges
 
 NEIGHBOURS = 8  # graph edges per unlabelled point
 LINK = 2.5  # unlabelled points within this many point spacings are one segment
@@ -88,9 +87,6 @@ def adopt_orphans(
 def _segments(xyz: npt.NDArray[np.float64], link: float) -> npt.NDArray[np.int32]:
     """Return a segment id per point: components of the graph of neighbours within link."""
     k = min(NEIGHBOURS + 1, len(xyz))
-    dist, nb = cKDTree(xyz).query(xyz, k, distance_upper_bound=link, workers=-1)
-    i = np.repeat(np.arange(len(xyz)), k - 1)
-    j, ok = nb[:, 1:].ravel(), np.isfinite(dist[:, 1:].ravel())
-    graph = coo_matrix((np.ones(int(ok.sum())), (i[ok], j[ok])), shape=(len(xyz), len(xyz)))
-    _, segment = connected_components(graph.tocsr(), directed=False)
-    return np.asarray(segment, np.int32)
+    i, j, length = knn_edges(*cKDTree(xyz).query(xyz, k, distance_upper_bound=link, workers=-1))
+    ok = np.isfinite(length)
+    return components(len(xyz), i[ok], j[ok])[1]

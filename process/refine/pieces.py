@@ -21,7 +21,7 @@ it touches when:
   of the desk would have become clutter).
 
 Written here because no library votes over such pieces; the graph's connected components are
-SciPy's, as in seams.py.
+SciPy's (graph.py).
 """
 
 from __future__ import annotations
@@ -30,12 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
 from process.refine.cells import class_cells
+from process.refine.graph import components, knn_edges
 
 NEIGHBOURS = 10  # graph edges per point
 LINK = 2.5  # points of one class within this many point spacings are one piece
@@ -107,15 +106,11 @@ def _vote(
 
     `dist` and `nb` hold each point's nearest neighbours, itself first.
     """
-    k = nb.shape[1] - 1
     link = LINK * float(np.median(dist[:, 1]))
-    i = np.repeat(np.arange(len(xyz)), k)
-    j, near = nb[:, 1:].ravel(), dist[:, 1:].ravel() < link
-    i, j = i[near], j[near]
+    i, j, length = knn_edges(dist, nb)
+    i, j = i[length < link], j[length < link]
     same = own[i] == own[j]
-    n = len(xyz)
-    graph = coo_matrix((np.ones(int(same.sum())), (i[same], j[same])), shape=(n, n))
-    count, piece = connected_components(graph.tocsr(), directed=False)
+    count, piece = components(len(xyz), i[same], j[same])
     size = np.bincount(piece, minlength=count)
     cluster = _main_cluster(piece, ids, count)
     label = np.zeros(count, np.uint8)
@@ -135,7 +130,7 @@ def _vote(
     candidate = ~main & (cluster > 0) & (size >= MIN_POINTS) & (share >= SHARE)
     candidate &= total >= CONTACT * np.sqrt(size)
     candidate &= (size <= RATIO * beside) & (other != Label.TABLE) & (label != Label.TABLE)
-    touching = np.zeros(n, bool)
+    touching = np.zeros(len(xyz), bool)
     touching[ci[to_top]] = True
     out = own.copy()
     for p in np.flatnonzero(candidate):

@@ -13,7 +13,7 @@ when:
   mostly on it (a book or a keyboard lying flat on a desk is an object of its own).
 
 Written here because neither Open3D nor SciPy has smooth-surface region growing (PCL's
-RegionGrowing is not a dependency); the graph's connected components are SciPy's.
+RegionGrowing is not a dependency); the graph's connected components are SciPy's (graph.py).
 """
 
 from __future__ import annotations
@@ -23,12 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 import open3d as o3d
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS
 from process.refine.cells import class_cells
+from process.refine.graph import components, knn_edges
 
 NEIGHBOURS = 10  # graph edges per point
 NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface variation)
@@ -130,16 +129,12 @@ def _surfaces(
     flat = values[:, 0] / np.maximum(values.sum(axis=1), 1e-18) < flatness
     dist, nb = neighbours  # each point's NEIGHBOURS + 1 nearest, itself first
     spacing = float(np.median(dist[:, 1]))
-    i = np.repeat(np.arange(len(xyz)), NEIGHBOURS)
-    j, d = nb[:, 1:].ravel(), dist[:, 1:].ravel()
+    i, j, d = knn_edges(dist, nb)
     ok = (d < 4 * spacing) & flat[i] & flat[j]
     i, j = i[ok], j[ok]
     ok = np.abs((normals[i] * normals[j]).sum(axis=1)) > np.cos(np.radians(angle_deg))
     ok &= np.abs(((xyz[j] - xyz[i]) * normals[i]).sum(axis=1)) < spacing  # in i's tangent plane
-    graph = coo_matrix((np.ones(ok.sum()), (i[ok], j[ok])), shape=(len(xyz), len(xyz)))
-    _, surface = connected_components(graph.tocsr(), directed=False)
-    ids: npt.NDArray[np.int32] = np.asarray(surface, np.int32)
-    return ids
+    return components(len(xyz), i[ok], j[ok])[1]
 
 
 def _majority(

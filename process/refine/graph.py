@@ -1,0 +1,29 @@
+"""Neighbour graphs over points: the k-NN edge list and its connected components.
+
+The seam vote (seams.py), the piece vote (pieces.py), orphan adoption (orphans.py) and the
+object grouping (objects.py) each link points or clusters and take the components: SciPy's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+def knn_edges(
+    dist: npt.NDArray[np.float64], nb: npt.NDArray[np.intp]
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.float64]]:
+    """Return (i, j, length) of every point's edges to its neighbours (itself first in nb)."""
+    k = nb.shape[1] - 1
+    return np.repeat(np.arange(len(nb)), k), nb[:, 1:].ravel(), dist[:, 1:].ravel()
+
+
+def components(
+    n: int, i: npt.NDArray[np.intp], j: npt.NDArray[np.intp]
+) -> tuple[int, npt.NDArray[np.int32]]:
+    """Return (count, component id per node) of the undirected graph of n nodes, edges i-j."""
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    count, ids = connected_components(graph.tocsr(), directed=False)
+    return int(count), np.asarray(ids, np.int32)
