@@ -6,10 +6,12 @@ the recordings' maps: refinement finds it). Making them took 12 minutes on 2 cor
 in `--cache` (an .npz per cloud, 0.6 GB in all) and made once; refining all of them takes 6.
 
     python -m benchmarks.refine_suite [--cache DIR] [--only SUBSTRING] [--make-only] [--paper]
-                                      [--set FIELD=VALUE ...]
+                                      [--set FIELD=VALUE ...] [--labels DIR]
 
 `--set` changes one RefineConfig field (`--set piece_vote=false --set seam_vote_m=0.05`), to
-measure a setting against ground truth on all the clouds before making it the default.
+measure a setting against ground truth on all the clouds before making it the default;
+`--labels` keeps each cloud's phase-III labels, to check that a change meant to be faster
+leaves them as they were.
 
 One line per cloud: name, points, object points, F1 phase I, II, III and III - I, then the mean
 and how many reach 0.95 per generator. Written for issue 12: the README's refinement figures per
@@ -194,6 +196,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--make-only", action="store_true", help="make the clouds, refine none")
     parser.add_argument("--paper", action="store_true", help="RefineConfig.paper()")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
+    parser.add_argument(
+        "--labels", type=Path, help="write each cloud's phase-III labels here (NAME.npy)"
+    )
     args = parser.parse_args(argv)
     cfg = RefineConfig.paper() if args.paper else RefineConfig()
     try:
@@ -219,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
             flush=True,
         )
         gains.setdefault(name.split()[0], []).append(f1["III"])
+        if args.labels:
+            args.labels.mkdir(parents=True, exist_ok=True)
+            np.save(args.labels / (name.replace(" ", "_") + ".npy"), result.labels_iii)
     for group, values in gains.items():
         high = sum(v >= 0.95 for v in values)
         print(f"{group}: mean III {np.mean(values):.3f}, {high} of {len(values)} >= 0.95")

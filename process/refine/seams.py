@@ -123,10 +123,15 @@ def _surfaces(
 ) -> npt.NDArray[np.int32]:
     """Return a smooth-surface id per point: components of the flat, coplanar-neighbour graph."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
-    cloud.estimate_covariances(o3d.geometry.KDTreeSearchParamKNN(NORMAL_NEIGHBOURS))
-    values, vectors = np.linalg.eigh(np.asarray(cloud.covariances))
-    normals = vectors[:, :, 0]  # the direction of least spread
-    flat = values[:, 0] / np.maximum(values.sum(axis=1), 1e-18) < flatness
+    search = o3d.geometry.KDTreeSearchParamKNN(NORMAL_NEIGHBOURS)
+    cloud.estimate_covariances(search)
+    # Open3D's normals from the covariances it holds (no second search): the direction of least
+    # spread, by its closed-form 3x3 solver, a tenth of the time of NumPy's batched eigh
+    cloud.estimate_normals(search)
+    covariances, normals = np.asarray(cloud.covariances), np.asarray(cloud.normals)
+    least = np.einsum("ni,nij,nj->n", normals, covariances, normals)  # smallest eigenvalue
+    trace = np.trace(covariances, axis1=1, axis2=2)
+    flat = least / np.maximum(trace, 1e-18) < flatness
     dist, nb = neighbours  # each point's NEIGHBOURS + 1 nearest, itself first
     spacing = float(np.median(dist[:, 1]))
     i, j, d = knn_edges(dist, nb)
