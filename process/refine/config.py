@@ -25,7 +25,7 @@ class RefineConfig:
     plane_max_remaining: int = 1000  # Max: the search ends once fewer points remain
     plane_iterations: int = 300  # RANSAC iterations per plane (Table 5: 300)
     plane_local_hypotheses: int = 300  # ... and this many planes of random points' neighbours
-    # compete with RANSAC's (plane_grid.local_plane: finds walls of a few % of the points); 0: off
+    # compete with RANSAC's (ransac.py: finds walls of a few % of the points); 0: off
     plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
     max_planes: int = 8  # planes tried at most, structural or not ...
     structure_planes: int = 2  # ... then up to this many more, kept only as walls, floors or

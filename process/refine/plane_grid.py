@@ -92,37 +92,3 @@ def wide_object_regions(
     mask = ndimage.binary_opening(mask, square)
     out[:] = mask.ravel()[flat] & ((labels == 0) | is_object)
     return out
-
-
-def local_plane(
-    sample: npt.NDArray[np.float32],
-    hypotheses: int,
-    distance_m: float,
-    rng: np.random.Generator,
-    *,
-    neighbours: int = 48,
-) -> tuple[npt.NDArray[np.float64], int]:
-    """Return the plane with the most inliers in `sample` among locally drawn hypotheses.
-
-    Each hypothesis is the least-squares plane of a random point's `neighbours` nearest
-    points, as locally sampled RANSAC (NAPSAC, Torr et al. 2002) draws its minimal sets near
-    each other. Open3D's RANSAC draws three points anywhere: a plane holding a share w of the
-    points needs about log(0.01) / w^3 draws, so with 300 a wall of 5 % of the remaining
-    points is found 1 time in 30 and the search ends early (generator 3: a 26,000-point wall
-    was never found). Here a draw succeeds when its point lies on the plane (about w). Open3D
-    has no local sampling; this is written by hand for that reason. Returns (a, b, c, d), count.
-    """
-    from scipy.spatial import cKDTree
-
-    k = min(neighbours, len(sample))
-    seeds = rng.choice(len(sample), min(hypotheses, len(sample)), replace=False)
-    _, near = cKDTree(sample).query(sample[seeds], k=k)
-    local = sample[near.reshape(len(seeds), k)].astype(np.float64)  # (H, k, 3)
-    centroid = local.mean(axis=1)
-    centred = local - centroid[:, None, :]
-    normal = np.linalg.eigh(np.einsum("hki,hkj->hij", centred, centred))[1][:, :, 0]  # (H, 3)
-    offset = -np.einsum("hi,hi->h", normal, centroid)
-    distance = np.abs(sample @ normal.T.astype(np.float32) + offset.astype(np.float32))
-    counts = (distance <= distance_m).sum(axis=0)
-    best = int(np.argmax(counts))
-    return np.append(normal[best], offset[best]), int(counts[best])

@@ -15,10 +15,10 @@ from process.refine.gravity import gravity
 from process.refine.plane_grid import (
     PIECE_CELL_M,
     connected_pieces,
-    local_plane,
     plane_uv,
     wide_object_regions,
 )
+from process.refine.ransac import best_plane
 from process.refine.surfaces import table_surfaces
 from process.refine.walls import (
     floor_said_above,
@@ -154,30 +154,19 @@ def min_plane_points(
 def _ransac_plane(
     points: npt.NDArray[np.float32], cfg: RefineConfig, rng: np.random.Generator
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]:
-    """Return the best plane (Open3D RANSAC on a sample, refit on all inliers) and its inliers."""
-    import open3d as o3d
-
+    """Return the best plane (RANSAC on a sample, refit on all inliers) and its inliers."""
     sample = points
     if 0 < cfg.plane_sample_points < len(points):
         # hypotheses scored on a random subset find the same dominant plane; all points are
         # then tested against it, so inlier counts are exact
         sample = points[rng.choice(len(points), cfg.plane_sample_points, replace=False)]
-    # Open3D scores RANSAC hypotheses on parallel threads, each with its own random stream,
-    # so with several threads the plane depends on the scheduling (the same cloud and seed gave
-    # different planes on a loaded machine); on one thread it follows the seed alone.
-    threads = o3d.utility.get_max_threads()
-    o3d.utility.set_max_threads(1)
-    try:
-        o3d.utility.random.seed(int(rng.integers(2**31)))
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sample.astype(np.float64)))
-        model, found = cloud.segment_plane(cfg.plane_distance_m, 3, cfg.plane_iterations)
-    finally:
-        o3d.utility.set_max_threads(threads)
-    model = np.asarray(model, np.float64)
-    if cfg.plane_local_hypotheses and len(sample) >= 3:
-        local, count = local_plane(sample, cfg.plane_local_hypotheses, cfg.plane_distance_m, rng)
-        if count > len(found):
-            model = local
+    model, _ = best_plane(
+        sample,
+        uniform=cfg.plane_iterations,
+        local=cfg.plane_local_hypotheses,
+        distance_m=cfg.plane_distance_m,
+        rng=rng,
+    )
     inliers = _inliers(points, model, cfg.plane_distance_m)
     if len(inliers) >= 3:
         model = _fit_plane(points[inliers])

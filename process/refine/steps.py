@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -262,14 +264,31 @@ def _correct(
     per_class: dict[int, ClassClustering] = {}
     next_id = 1
     sparse_ids: list[int] = []
-    for label in (int(c) for c in np.unique(labels) if c > 0):
-        members = np.flatnonzero(labels == label)
-        cells, cell_of, voxel_m = capped_cells(points[members], cfg.cluster_voxel_m, cfg.max_cells)
+    classes = [int(c) for c in np.unique(labels) if c > 0]
+    members_of = {label: np.flatnonzero(labels == label) for label in classes}
+    cells_of = {
+        label: capped_cells(points[members], cfg.cluster_voxel_m, cfg.max_cells)
+        for label, members in members_of.items()
+    }
+    for label, (cells, _, voxel_m) in cells_of.items():
         if voxel_m != cfg.cluster_voxel_m:
-            logger.info(
-                "class %d: %d points, DBSCAN on %.3f m voxels", label, len(members), voxel_m
+            logger.info("class %d: %d points, DBSCAN on %.3f m voxels", label, len(cells), voxel_m)
+    # the classes are independent and most of a class's DBSCAN runs in NumPy, SciPy and the
+    # KD-tree with the GIL released: two classes at a time on two cores took the 332k office's
+    # step from 2.0-2.2 s to ~1.6 s. Results do not depend on the order (each class alone).
+    largest_first = sorted(classes, key=lambda c: -len(cells_of[c][0]))
+    with ThreadPoolExecutor(max_workers=_workers(len(classes))) as pool:
+        done = dict(
+            zip(
+                largest_first,
+                pool.map(lambda c: _cluster_class(c, cells_of[c][0], cfg, shared), largest_first),
+                strict=True,
             )
-        entry, cluster_of, dense = _cluster_class(label, cells, cfg, shared)
+        )
+    for label in classes:
+        members = members_of[label]
+        cells, cell_of, _ = cells_of[label]
+        entry, cluster_of, dense = done[label]
         sizes = np.bincount(cluster_of[cluster_of >= 0], minlength=1)
         min_size = cfg.min_cluster_points if entry.choice is None else entry.choice.min_size
         keep = sizes >= min_size
@@ -292,6 +311,15 @@ def _correct(
         gone = np.isin(out_clusters, drop)
         out_labels[gone], out_clusters[gone] = 0, 0
     return out_labels, out_clusters, per_class, shared
+
+
+def _workers(tasks: int) -> int:
+    """Return how many classes to cluster at once: one per core this process may use."""
+    try:
+        cores = len(os.sched_getaffinity(0))  # the cores this process is allowed (containers)
+    except AttributeError:  # macOS, Windows
+        cores = os.cpu_count() or 1
+    return max(1, min(tasks, cores))
 
 
 def _sor(points: npt.NDArray[np.float32], cfg: RefineConfig) -> npt.NDArray[np.bool_]:

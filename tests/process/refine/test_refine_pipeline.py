@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,24 @@ UP = np.array([0.0, 0.0, 1.0])
 @pytest.fixture(scope="module")
 def office() -> SyntheticScene:
     return indoor_scene(seed=1, spacing_m=0.03)  # ~95k points
+
+
+def test_classes_clustered_side_by_side_give_what_one_at_a_time_gives(
+    office: SyntheticScene, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import process.refine.steps as steps
+
+    assert steps._workers(5) == min(5, len(os.sched_getaffinity(0)))
+    monkeypatch.setattr(steps, "_workers", lambda tasks: min(tasks, 3))  # on any machine
+    both = refine(office.cloud, RefineConfig(), up=UP)
+    monkeypatch.setattr(steps, "_workers", lambda tasks: 1)
+    alone = refine(office.cloud, RefineConfig(), up=UP)
+    np.testing.assert_array_equal(both.labels_ii, alone.labels_ii)
+    np.testing.assert_array_equal(both.clusters_ii, alone.clusters_ii)
+    np.testing.assert_array_equal(both.labels_iii, alone.labels_iii)
+    assert {c: e.choice for c, e in both.dbscan.items()} == {
+        c: e.choice for c, e in alone.dbscan.items()
+    }
 
 
 def test_f1_over_target_classes_rises_from_phase_i_to_iii(office: SyntheticScene) -> None:

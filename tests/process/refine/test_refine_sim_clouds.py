@@ -51,8 +51,11 @@ def test_the_papers_literal_reading_stays_available_and_below_the_defaults(
         for p, c in result.phase_clouds().items()
     }
     assert all(e.choice is None or e.choice.rule == "literal" for e in result.dbscan.values())
-    assert f1["III"] >= f1["I"] + 0.15  # measured 0.607 -> 0.847
-    assert f1["III"] <= 0.88  # the defaults: 0.934
+    # measured with RANSAC seeds 0-4: 0.607 -> 0.844-0.915 (which walls uniform draws find
+    # first), the defaults 0.963-0.964
+    assert f1["III"] >= f1["I"] + 0.15
+    defaults = refine(room.cloud, RefineConfig(), up=room.up).phase_f1(room.truth)["III"]
+    assert f1["III"] <= defaults - 0.03
 
 
 @pytest.fixture(scope="module")

@@ -13,8 +13,9 @@ from benchmarks.generator3 import gen3_scene
 from capture.recording import Label
 from process.refine import RefineConfig, refine
 from process.refine.job import refinement_metrics
-from process.refine.plane_grid import local_plane, wide_object_regions
+from process.refine.plane_grid import wide_object_regions
 from process.refine.planes import Plane, segment_planes
+from process.refine.ransac import best_plane
 from process.refine.walls import behind_walls, furniture_fronts, objects_on_walls
 
 CFG = RefineConfig(plane_min_points=2000, plane_max_remaining=100)
@@ -42,7 +43,7 @@ def test_a_wall_of_five_percent_of_the_points_is_found_by_local_hypotheses() -> 
     wall[:, 1] += rng.normal(0.0, 0.003, len(wall)).astype(np.float32)
     points = np.concatenate([*patches, wall]).astype(np.float32)
     assert 0.04 < len(wall) / len(points) < 0.06
-    model, count = local_plane(points, 300, 0.02, rng)
+    model, count = best_plane(points, uniform=0, local=300, distance_m=0.02, rng=rng)
     assert abs(model[1]) > np.cos(np.radians(2.0))  # the normal is the wall's, +-y
     assert abs(-model[3] / model[1] - 2.0) < 0.01  # at y = 2
     assert count >= len(wall)  # its points, and the few others within 2 cm
