@@ -31,7 +31,7 @@ def test_three_points_give_their_plane_and_a_line_gives_none() -> None:
 def test_inlier_counts_are_exact_across_chunks() -> None:
     points = np.zeros((7, 3), np.float32)
     points[:, 2] = [0.0, 0.01, 0.019, 0.021, -0.015, 0.5, -2.0]
-    models = np.tile([0.0, 0.0, 1.0, 0.0], (600, 1))  # z = 0, more than one 256-chunk
+    models = np.tile([0.0, 0.0, 1.0, 0.0], (600, 1))  # z = 0, over several 64-plane chunks
     models[300:, 3] = -0.5  # z = 0.5
     counts = inlier_counts(points, models, 0.02)
     assert (counts[:300] == 4).all()  # 0, 0.01, 0.019, -0.015
