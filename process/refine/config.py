@@ -104,6 +104,9 @@ class RefineConfig:
     # stand on a table's top, min_cluster_points of them, become an object (tabletop.py)
     orphan_adoption: bool = True  # then a segment still 0 that the network labelled (a chair's
     # back it called floor) joins the one object class it touches, not a table (orphans.py)
+    raised_vote: bool = True  # then table-labelled pieces above a table surface's noise band
+    # (a monitor's base plate, forearms on a desk) take the class of the object they touch,
+    # when that is most of their contacts and at least their size (raised.py)
     seam_vote_m: float = 0.08  # after regrowth, an object point this close to another class
     # takes the class of the smooth surface it lies on, if that class holds most of it and the
     # point's own object lies mostly elsewhere: a label bled across a contact (seams.py); 0: off
@@ -152,6 +155,7 @@ class RefineConfig:
             "tabletop_objects": False,
             "seam_vote_m": 0.0,
             "piece_vote": False,
+            "raised_vote": False,
             "orphan_adoption": False,
             "object_bridge_m": 0.0,
             "regrow_structure": True,

@@ -124,6 +124,7 @@ def refinement_metrics(
         "faces_filled": len(result.faces_filled),
         "seam_relabelled": len(result.seams),
         "piece_relabelled": len(result.pieces),
+        "raised_relabelled": len(result.raised),
         "orphans_adopted": len(result.orphans),
         "final": int(result.kept.sum()),
     }

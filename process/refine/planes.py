@@ -48,6 +48,7 @@ class Plane:
     on_wall: int = 0  # inliers in front of a parallel wall behind, given back (walls.py)
     off_band: int = 0  # inliers beyond the plane's own noise band, given back (walls.py)
     note: str = ""  # why a level plane that is not structural is (not) a table surface
+    top: npt.NDArray[np.intp] | None = None  # a table surface's points, whatever their labels
 
 
 @dataclass(frozen=True)

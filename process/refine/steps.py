@@ -24,6 +24,7 @@ from process.refine.orphans import adopt_orphans
 from process.refine.outliers import sor_inliers
 from process.refine.pieces import piece_vote
 from process.refine.planes import PlaneSegmentation, segment_planes
+from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
@@ -79,6 +80,8 @@ class RefineResult:
     # input indices of pieces that took the class of the object holding them (pieces.py)
     orphans: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of unlabelled segments the network saw, given the class they touch (orphans.py)
+    raised: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of table pieces above a table's top given the object they touch (raised.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -125,9 +128,9 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points the seam and piece votes relabelled, with their new class."""
+        """Return the points the seam, piece and raised votes relabelled, with their new class."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
-        return cloud.select(np.union1d(self.seams, self.pieces))
+        return cloud.select(np.union1d(np.union1d(self.seams, self.pieces), self.raised))
 
     def regrown_cloud(self) -> LabelledCloud:
         """Return the points regrowth labelled, with their new class and cluster."""
@@ -226,6 +229,12 @@ def refine(
             )
             regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
     lap("regrowth")
+    raised = np.zeros(0, np.intp)
+    if cfg.raised_vote and planes.up is not None:
+        tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
+        lifted = raised_off_tables(cloud.points, labels_iii, clusters_iii, tops, planes.up)
+        labels_iii, clusters_iii, raised = lifted.labels, lifted.clusters, lifted.relabelled
+        lap("raised")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -248,7 +257,7 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans,
+        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised,
     )  # fmt: skip
 
 

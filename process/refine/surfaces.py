@@ -81,12 +81,15 @@ def table_surfaces(
         surface, note = _surface(
             points, plane, up, heights, floor_m, walls, cfg, density_per_m2, labels, loose
         )
+        top = surface
         if labels is not None:
             other = _other_cells(points, surface, plane, labels, cfg.table_other_cell_m)
             surface = surface[~other & np.isin(labels[surface], TO_TABLE)]
         to_table[surface] = True
         note = f"{plane.note}; {note}" if plane.note else note  # e.g. why it is no wall
-        out.append(replace(plane, note=note, table_points=len(surface)))
+        out.append(
+            replace(plane, note=note, table_points=len(surface), top=top if len(top) else None)
+        )
     return tuple(out), to_table
 
 

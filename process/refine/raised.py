@@ -1,0 +1,176 @@
+"""Table labels raised above a table's top go to the object they belong to.
+
+A network's table label bleeds a few centimetres up whatever stands on a desk: a monitor's base
+plate, 1 cm thick, and the foot of its stand come out table, and so do forearms resting on the
+desk. DBSCAN then joins them to the desk (they touch it), and neither the seam vote (the plate
+is flat, its majority table) nor the piece vote (no gap: it sits on the desk) takes them away.
+Yet a table is its top and what lies below it: a point above the top's own noise band is
+something standing on it. Here the table-labelled points above a table surface (the plane step's,
+surfaces.py), over its footprint, are joined into pieces (within `LINK` point spacings), and a
+piece takes the class of the object it touches when
+- `SHARE` of its contacts (neighbours of another object class, above the top too) are of that
+  class, and they are many for its size (`CONTACT` times the square root of its points), and
+- it is at most `RATIO` times the size of that class's points it is linked to (a shelf the
+  network rightly calls table, above a desk, is larger than the monitor standing on it).
+A piece touching nothing but table (a box the network called table whole) stays table.
+
+Written here because no library relabels over such pieces; the graph is SciPy's (graph.py).
+Measured on generator 4's office at 200k object points (issue 12): see the README.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from capture.recording import OBJECT_LABELS, Label
+from process.refine.graph import components, knn_edges
+from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
+
+NEIGHBOURS = 10  # graph edges per point
+LINK = 2.5  # points within this many point spacings are linked
+MIN_POINTS = 10  # smaller pieces keep their label
+SHARE = 0.9  # of a piece's contacts are of the class it takes
+CONTACT = 1.0  # contacts >= CONTACT * sqrt(points of the piece)
+RATIO = 1.0  # a piece at most this many times the linked points of the class it takes
+BAND_SIGMAS = 3.0  # the top's noise band: this many robust standard deviations of its offsets
+MIN_BAND_M = 0.005  # ... at least this
+REACH_M = 0.5  # points up to this far above the top are looked at
+CELL_M = 0.05  # footprint grid of the top
+SIGMA_PROBES = 2000  # points of a top whose offsets from their neighbours' give its noise
+
+
+@dataclass(frozen=True)
+class RaisedVote:
+    """The labels and clusters after the vote, and the points relabelled (indices)."""
+
+    labels: npt.NDArray[np.uint8]
+    clusters: npt.NDArray[np.int32]
+    relabelled: npt.NDArray[np.intp]
+
+
+def raised_off_tables(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    tops: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]],
+    up: npt.NDArray[np.float64],
+) -> RaisedVote:
+    """Relabel table pieces standing above table tops by the object they touch.
+
+    Args:
+        points: (N, 3) positions.
+        labels: (N,) classes (phase III so far).
+        clusters: (N,) object ids (0: none).
+        tops: per table surface, its plane (a, b, c, d) and the indices of its points.
+        up: gravity-up.
+    """
+    out_labels, out_clusters = labels.copy(), clusters.copy()
+    changed: list[npt.NDArray[np.intp]] = []
+    for model, surface in tops:
+        if len(surface) < MIN_POINTS:
+            continue
+        # the surface's own points above its band count too: RANSAC's band (plane_distance_m)
+        # takes a base plate 1 cm up into the top
+        rows = _above(points, model, surface, up)
+        rows = rows[np.isin(out_labels[rows], OBJECT_LABELS)]
+        flips = _vote(np.asarray(points[rows], np.float64), out_labels[rows], out_clusters[rows])
+        for target, cluster, members in flips:
+            out_labels[rows[members]] = target
+            out_clusters[rows[members]] = cluster
+            changed.append(rows[members])
+    relabelled = np.unique(np.concatenate(changed)) if changed else np.zeros(0, np.intp)
+    return RaisedVote(out_labels, out_clusters, relabelled)
+
+
+def _above(
+    points: npt.NDArray[np.floating],
+    model: npt.NDArray[np.float64],
+    surface: npt.NDArray[np.intp],
+    up: npt.NDArray[np.float64],
+) -> npt.NDArray[np.intp]:
+    """Return the points above the top's noise band, within REACH_M, over one of its pieces.
+
+    Per connected piece of the surface (a desk): its top is the upper quartile of its points'
+    offsets from the plane, as RANSAC's 2 cm band takes both faces of a thin desk top seen
+    from above and below; the noise is the robust spread of each point's offset from its own
+    nearest neighbours' (a local measure, blind to the two faces and to a slight tilt).
+    """
+    model = model if float(model[:3] @ up) >= 0 else -model  # offsets grow upwards
+    offset = np.asarray(points, np.float32) @ model[:3].astype(np.float32) + np.float32(model[3])
+    uv_surface = plane_uv(np.asarray(points[surface], np.float32), model)
+    piece = connected_pieces(uv_surface, PIECE_CELL_M)
+    # every piece's top lies within RANSAC's band (a few cm) of the plane
+    near_top = np.flatnonzero((offset > -0.05) & (offset <= REACH_M + 0.05))
+    uv_near, h = plane_uv(np.asarray(points[near_top], np.float32), model), offset[near_top]
+    out = []
+    for k in range(int(piece.max()) + 1):
+        members = surface[piece == k]
+        if len(members) < MIN_POINTS * NEIGHBOURS:
+            continue
+        own = offset[members].astype(np.float64)
+        xyz = np.asarray(points[members], np.float64)
+        probe = np.linspace(0, len(members) - 1, min(len(members), SIGMA_PROBES)).astype(np.intp)
+        _, near = cKDTree(xyz).query(xyz[probe], NEIGHBOURS + 1)
+        local = own[probe] - np.median(own[near], axis=1)
+        sigma = 1.4826 * float(np.median(np.abs(local - np.median(local))))
+        top = float(np.percentile(own, 75))
+        band = top + max(BAND_SIGMAS * sigma, MIN_BAND_M)
+        uv_own = uv_surface[piece == k]
+        low, high = uv_own.min(axis=0) - CELL_M, uv_own.max(axis=0) + CELL_M
+        pick = (h > band) & (h <= top + REACH_M)
+        pick[pick] &= np.all((uv_near[pick] >= low) & (uv_near[pick] <= high), axis=1)
+        rows, uv_rows = near_top[pick], uv_near[pick]
+        if len(rows) == 0:
+            continue
+        ij = grid_of(np.concatenate([uv_own, uv_rows]), CELL_M)
+        shape = tuple(int(v) + 1 for v in ij.max(axis=0))
+        footprint = np.zeros(shape, bool)
+        footprint[ij[: len(members), 0], ij[: len(members), 1]] = True
+        footprint = ndimage.binary_closing(footprint, np.ones((3, 3), bool))  # under objects
+        out.append(rows[footprint[ij[len(members) :, 0], ij[len(members) :, 1]]])
+    return np.unique(np.concatenate(out)) if out else np.zeros(0, np.intp)
+
+
+def _vote(
+    xyz: npt.NDArray[np.float64],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+) -> list[tuple[int, int, npt.NDArray[np.intp]]]:
+    """Return (class, cluster, rows) for each table piece that goes to the object it touches."""
+    table = labels == Label.TABLE
+    if table.sum() < MIN_POINTS or table.all() or len(xyz) <= NEIGHBOURS:
+        return []
+    dist, nb = cKDTree(xyz).query(xyz, NEIGHBOURS + 1, workers=-1)
+    spacing = float(np.median(dist[:, 1]))
+    i, j, d = knn_edges(dist, nb)
+    near = d < LINK * spacing
+    i, j = i[near], j[near]
+    same = labels[i] == labels[j]
+    _, piece = components(len(xyz), i[same], j[same])  # pieces of one class
+    # contacts of table pieces with other classes' points
+    contact = table[i] & ~table[j]
+    ci, cj = i[contact], j[contact]
+    flips = []
+    for p in np.unique(piece[table]):
+        members = np.flatnonzero((piece == p) & table)
+        if len(members) < MIN_POINTS:
+            continue
+        touching = cj[piece[ci] == p]
+        if len(touching) < CONTACT * np.sqrt(len(members)):
+            continue
+        classes, counts = np.unique(labels[touching], return_counts=True)
+        target = int(classes[np.argmax(counts)])
+        if counts.max() < SHARE * len(touching):
+            continue
+        linked = np.unique(piece[touching[labels[touching] == target]])
+        size = int(np.isin(piece, linked).sum())
+        if len(members) > RATIO * size:
+            continue
+        ids, votes = np.unique(clusters[touching[labels[touching] == target]], return_counts=True)
+        flips.append((target, int(ids[np.argmax(votes)]), members))
+    return flips

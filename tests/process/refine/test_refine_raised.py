@@ -1,0 +1,124 @@
+"""Table labels raised above a table's top (process/refine/raised.py): known relabellings."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from helpers_refine import grid_patch, labelled
+
+from capture.recording import Label
+from process.refine import RefineConfig, refine
+from process.refine.job import refinement_metrics
+from process.refine.raised import raised_off_tables
+
+UP = np.array([0.0, 0.0, 1.0])
+DESK_Z = 0.75
+STEP = 0.01
+
+
+def _box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> np.ndarray:
+    """Return the surface of an axis-aligned box sampled every STEP (all six faces)."""
+    faces = []
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    for z in (z0, z1):
+        faces.append(grid_patch((x0, x1), (y0, y1), z=z, step=STEP))
+    gx, gz = np.meshgrid(np.arange(x0, x1, STEP), np.arange(z0, z1, STEP))
+    for y in (y0, y1):
+        faces.append(np.column_stack([gx.ravel(), np.full(gx.size, y), gz.ravel()]))
+    gy, gz = np.meshgrid(np.arange(y0, y1, STEP), np.arange(z0, z1, STEP))
+    for x in (x0, x1):
+        faces.append(np.column_stack([np.full(gy.size, x), gy.ravel(), gz.ravel()]))
+    return np.concatenate(faces).astype(np.float32)
+
+
+def _desk_with_monitor(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """A desk top with 2 mm noise; a monitor on a 1.1 cm base plate; a box; a shelf above."""
+    desk = grid_patch((0.0, 1.6), (0.0, 0.8), z=DESK_Z, step=STEP)
+    desk[:, 2] += rng.normal(0.0, 0.002, len(desk)).astype(np.float32)
+    plate = _box((0.3, 0.3, DESK_Z), (0.48, 0.52, DESK_Z + 0.011))
+    stand = _box((0.37, 0.39, DESK_Z + 0.011), (0.40, 0.45, DESK_Z + 0.2))
+    screen = _box((0.35, 0.1, DESK_Z + 0.12), (0.38, 0.7, DESK_Z + 0.45))
+    box = _box((1.0, 0.2, DESK_Z), (1.15, 0.35, DESK_Z + 0.1))  # the network calls it table
+    return {"desk": desk, "plate": plate, "stand": stand, "screen": screen, "box": box}
+
+
+def _scene(parts: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    points = np.concatenate(list(parts.values()))
+    index, start = {}, 0
+    for name, part in parts.items():
+        index[name] = np.arange(start, start + len(part))
+        start += len(part)
+    return points, index
+
+
+def test_a_monitors_plate_and_stand_foot_called_table_join_the_monitor() -> None:
+    points, at = _scene(_desk_with_monitor(np.random.default_rng(0)))
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    clusters = np.full(len(points), 1, np.int32)  # the desk's object holds it all ...
+    stand_low = at["stand"][points[at["stand"], 2] < DESK_Z + 0.06]  # bleed: 6 cm up
+    for name in ("screen", "stand"):
+        labels[at[name]], clusters[at[name]] = Label.TV_MONITOR, 2  # ... but the monitor
+    labels[stand_low], clusters[stand_low] = Label.TABLE, 1
+    before = labels.copy()
+    tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), at["desk"])]
+    vote = raised_off_tables(points, labels, clusters, tops, UP)
+    plate_top = at["plate"][points[at["plate"], 2] > DESK_Z + 0.008]
+    assert (vote.labels[plate_top] == Label.TV_MONITOR).all()
+    assert (vote.labels[stand_low] == Label.TV_MONITOR).all()
+    assert (vote.clusters[stand_low] == 2).all()  # into the monitor's object
+    assert (vote.labels[at["desk"]] == Label.TABLE).all()  # the top itself stays
+    assert (vote.labels[at["box"]] == Label.TABLE).all()  # touches nothing but table
+    assert set(vote.relabelled) <= set(at["plate"]) | set(stand_low)
+    assert (labels == before).all()  # the input is not changed in place
+
+
+def test_a_shelf_called_table_above_the_desk_stays_table_under_a_small_monitor() -> None:
+    parts = _desk_with_monitor(np.random.default_rng(1))
+    shelf = _box((0.0, 0.6, DESK_Z + 0.3), (1.6, 0.8, DESK_Z + 0.32))  # a hutch's shelf
+    small = _box((0.7, 0.65, DESK_Z + 0.32), (0.8, 0.75, DESK_Z + 0.42))  # a small monitor
+    points, at = _scene({**parts, "shelf": shelf, "small": small})
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    labels[at["small"]] = Label.TV_MONITOR
+    labels[at["screen"]] = labels[at["stand"]] = Label.TV_MONITOR
+    clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
+    tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), at["desk"])]
+    vote = raised_off_tables(points, labels, clusters, tops, UP)
+    assert (vote.labels[at["shelf"]] == Label.TABLE).all()  # larger than what it touches
+    plate_top = at["plate"][points[at["plate"], 2] > DESK_Z + 0.008]
+    assert (vote.labels[plate_top] == Label.TV_MONITOR).all()  # the big monitor's plate still
+
+
+def test_without_tops_or_with_nothing_above_nothing_changes() -> None:
+    points, at = _scene(_desk_with_monitor(np.random.default_rng(2)))
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    labels[at["screen"]] = Label.TV_MONITOR
+    clusters = np.ones(len(points), np.int32)
+    vote = raised_off_tables(points, labels, clusters, [], UP)
+    assert len(vote.relabelled) == 0 and (vote.labels == labels).all()
+    high = [(np.array([0.0, 0.0, 1.0, -(DESK_Z + 1.0)]), at["desk"][:5])]  # too few points
+    assert len(raised_off_tables(points, labels, clusters, high, UP).relabelled) == 0
+
+
+def test_refine_gives_the_plate_and_foot_back_to_the_monitor() -> None:
+    """Through refine (the desk found as a table surface above a floor), shown in the .rrd."""
+    parts = _desk_with_monitor(np.random.default_rng(3))
+    legs = [_box((x, y, 0.0), (x + 0.04, y + 0.04, DESK_Z)) for x in (0.0, 1.5) for y in (0.0, 0.7)]
+    floor = grid_patch((-0.5, 2.1), (-0.5, 1.3), z=0.0, step=0.02)
+    points, at = _scene({**parts, "legs": np.concatenate(legs), "floor": floor})
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    labels[at["floor"]] = Label.FLOOR
+    labels[at["screen"]] = labels[at["stand"]] = Label.TV_MONITOR
+    foot = at["stand"][points[at["stand"], 2] < DESK_Z + 0.06]
+    labels[foot] = Label.TABLE
+    cloud = labelled(points, labels)
+    cfg = RefineConfig(plane_min_points=1500, plane_max_remaining=100)
+    out = refine(cloud, cfg, up=UP)
+    top = next(p.top for p in out.planes.planes if p.top is not None)
+    assert np.isin(at["desk"], top).mean() > 0.9
+    assert (out.labels_iii[foot] == Label.TV_MONITOR).mean() > 0.9
+    assert refinement_metrics(out, gt_cloud=None)["points"]["raised_relabelled"] >= len(foot)
+    assert len(out.seam_cloud()) >= len(out.raised)  # shown with the seams in the .rrd
+    off = refine(cloud, dataclasses.replace(cfg, raised_vote=False), up=UP)
+    assert (off.labels_iii[foot] == Label.TABLE).mean() > 0.9
+    assert not RefineConfig.paper().raised_vote
