@@ -81,12 +81,29 @@ def test_a_shelf_called_table_above_the_desk_stays_table_under_a_small_monitor()
     labels = np.full(len(points), Label.TABLE, np.uint8)
     labels[at["small"]] = Label.TV_MONITOR
     labels[at["screen"]] = labels[at["stand"]] = Label.TV_MONITOR
+    labels[at["stand"][points[at["stand"], 2] < DESK_Z + 0.06]] = Label.TABLE
     clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
     tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), at["desk"])]
     vote = raised_off_tables(points, labels, clusters, tops, UP)
     assert (vote.labels[at["shelf"]] == Label.TABLE).all()  # larger than what it touches
     plate_top = at["plate"][points[at["plate"], 2] > DESK_Z + 0.008]
     assert (vote.labels[plate_top] == Label.TV_MONITOR).all()  # the big monitor's plate still
+
+
+def test_a_level_sheet_above_the_top_stays_table_beside_a_person() -> None:
+    """A second desk's top 1.5 cm higher, touching a person leaning on it: part of a table."""
+    rng = np.random.default_rng(4)
+    desk = grid_patch((0.0, 1.0), (0.0, 0.8), z=DESK_Z, step=STEP)
+    higher = grid_patch((1.0, 1.2), (0.0, 0.8), z=DESK_Z + 0.015, step=STEP)
+    person = _box((1.05, 0.3, DESK_Z + 0.016), (1.15, 0.5, DESK_Z + 0.4))  # an arm on it
+    points = np.concatenate([desk, higher, person])
+    points[:, 2] += rng.normal(0.0, 0.001, len(points)).astype(np.float32)
+    labels = np.r_[np.full(len(desk) + len(higher), Label.TABLE), np.full(len(person), 6)]
+    labels = labels.astype(np.uint8)
+    clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
+    tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), np.arange(len(desk) + len(higher)))]
+    vote = raised_off_tables(points, labels, clusters, tops, UP)
+    assert (vote.labels[: len(desk) + len(higher)] == Label.TABLE).all()
 
 
 def test_without_tops_or_with_nothing_above_nothing_changes() -> None:
