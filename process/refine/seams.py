@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS
 from process.refine.cells import class_cells
-from process.refine.graph import components, knn_edges
+from process.refine.graph import components
 
 NEIGHBOURS = 10  # graph edges per point
 NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface variation)
@@ -134,12 +134,16 @@ def _surfaces(
     flat = least / np.maximum(trace, 1e-18) < flatness
     dist, nb = neighbours  # each point's NEIGHBOURS + 1 nearest, itself first
     spacing = float(np.median(dist[:, 1]))
-    i, j, d = knn_edges(dist, nb)
-    ok = (d < 4 * spacing) & flat[i] & flat[j]
-    i, j = i[ok], j[ok]
-    ok = np.abs((normals[i] * normals[j]).sum(axis=1)) > np.cos(np.radians(angle_deg))
-    ok &= np.abs(((xyz[j] - xyz[i]) * normals[i]).sum(axis=1)) < spacing  # in i's tangent plane
-    return components(len(xyz), i[ok], j[ok])[1]
+    # per row (a point and its neighbours) rather than per edge: the point's own normal and
+    # position broadcast instead of being gathered once per edge
+    rows = np.flatnonzero(flat)
+    near = nb[rows, 1:]
+    ok = (dist[rows, 1:] < 4 * spacing) & flat[near]
+    own = normals[rows][:, None, :]
+    ok &= np.abs((normals[near] * own).sum(axis=2)) > np.cos(np.radians(angle_deg))
+    ok &= np.abs(((xyz[near] - xyz[rows][:, None, :]) * own).sum(axis=2)) < spacing  # tangent
+    i = np.repeat(rows, np.count_nonzero(ok, axis=1))
+    return components(len(xyz), i, near[ok])[1]
 
 
 def _majority(
