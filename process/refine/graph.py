@@ -27,3 +27,22 @@ def components(
     graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
     count, ids = connected_components(graph.tocsr(), directed=False)
     return int(count), np.asarray(ids, np.int32)
+
+
+def class_pieces(
+    dist: npt.NDArray[np.float64],
+    nb: npt.NDArray[np.intp],
+    labels: npt.NDArray[np.uint8],
+    link_spacings: float,
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], int, npt.NDArray[np.int32]]:
+    """Return the k-NN edges (i, j) shorter than `link_spacings` point spacings, and the pieces.
+
+    A piece is a component of the edges between points of one label; the spacing is the
+    median distance to the nearest neighbour (`dist[:, 1]`). Returns (i, j, count, piece).
+    """
+    link = link_spacings * float(np.median(dist[:, 1]))
+    i, j, length = knn_edges(dist, nb)
+    i, j = i[length < link], j[length < link]
+    same = labels[i] == labels[j]
+    count, piece = components(len(nb), i[same], j[same])
+    return i, j, count, piece

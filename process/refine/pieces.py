@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
 from process.refine.cells import class_cells
-from process.refine.graph import components, knn_edges
+from process.refine.graph import class_pieces
 
 NEIGHBOURS = 10  # graph edges per point
 LINK = 2.5  # points of one class within this many point spacings are one piece
@@ -106,11 +106,8 @@ def _vote(
 
     `dist` and `nb` hold each point's nearest neighbours, itself first.
     """
-    link = LINK * float(np.median(dist[:, 1]))
-    i, j, length = knn_edges(dist, nb)
-    i, j = i[length < link], j[length < link]
+    i, j, count, piece = class_pieces(dist, nb, own, LINK)
     same = own[i] == own[j]
-    count, piece = components(len(xyz), i[same], j[same])
     size = np.bincount(piece, minlength=count)
     cluster = _main_cluster(piece, ids, count)
     label = np.zeros(count, np.uint8)

@@ -28,7 +28,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import components, knn_edges
+from process.refine.graph import class_pieces
 from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
 
 NEIGHBOURS = 10  # graph edges per point
@@ -151,12 +151,7 @@ def _vote(
     if table.sum() < MIN_POINTS or table.all() or len(xyz) <= NEIGHBOURS:
         return []
     dist, nb = cKDTree(xyz).query(xyz, NEIGHBOURS + 1, workers=-1)
-    spacing = float(np.median(dist[:, 1]))
-    i, j, d = knn_edges(dist, nb)
-    near = d < LINK * spacing
-    i, j = i[near], j[near]
-    same = labels[i] == labels[j]
-    _, piece = components(len(xyz), i[same], j[same])  # pieces of one class
+    i, j, _, piece = class_pieces(dist, nb, labels, LINK)  # pieces of one class
     # contacts of table pieces with other classes' points
     contact = table[i] & ~table[j]
     ci, cj = i[contact], j[contact]

@@ -23,3 +23,21 @@ def test_components_join_chains_either_way_and_keep_lone_nodes() -> None:
     assert len({ids[0], ids[3], ids[5]}) == 3
     assert ids.dtype == np.int32
     assert components(3, np.zeros(0, np.intp), np.zeros(0, np.intp))[0] == 3
+
+
+def test_class_pieces_link_one_label_within_the_spacing_bound() -> None:
+    from scipy.spatial import cKDTree
+
+    from process.refine.graph import class_pieces
+
+    # a row of points 1 cm apart: labels 4 4 4 | 5 5 | 4 4 after a 5 cm gap
+    x = np.array([0.0, 0.01, 0.02, 0.03, 0.04, 0.09, 0.10])
+    xyz = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    labels = np.array([4, 4, 4, 5, 5, 4, 4], np.uint8)
+    dist, nb = cKDTree(xyz).query(xyz, 3)
+    i, j, count, piece = class_pieces(dist, nb, labels, 2.5)  # link: 2.5 cm
+    assert count == 3
+    assert piece[0] == piece[1] == piece[2] and piece[3] == piece[4] and piece[5] == piece[6]
+    assert len({piece[0], piece[3], piece[5]}) == 3  # the gap of 5 cm splits the 4s
+    assert (np.abs(x[i] - x[j]) < 0.025).all() and len(i) > 0  # only edges under the link
+    assert ((labels[i] != labels[j]) & (np.minimum(i, j) == 2)).any()  # the 4-5 contact stays
