@@ -45,6 +45,7 @@ SHEET_M = 0.01  # a level piece thinner than this is a stretch of a top (_level_
 FLAT_ON_TABLES = (Label.TV_MONITOR, Label.CLUTTER)  # ... unless it joins what lies flat on desks
 SHEET_TILT_DEG = 25.0
 SIGMA_PROBES = 2000  # points of a top whose offsets from their neighbours' give its noise
+MIN_TOP_POINTS = 100  # a top's piece with fewer points has no measurable top or noise
 
 
 @dataclass(frozen=True)
@@ -113,8 +114,9 @@ def _above(
     uv_near, h = plane_uv(np.asarray(points[near_top], np.float32), model), offset[near_top]
     out = []
     for k in range(int(piece.max()) + 1):
-        members = surface[piece == k]
-        if len(members) < MIN_POINTS * NEIGHBOURS:
+        in_piece = piece == k
+        members = surface[in_piece]
+        if len(members) < MIN_TOP_POINTS:
             continue
         own = offset[members].astype(np.float64)
         xyz = np.asarray(points[members], np.float64)
@@ -124,7 +126,7 @@ def _above(
         sigma = 1.4826 * float(np.median(np.abs(local - np.median(local))))
         top = float(np.percentile(own, 75))
         band = top + max(BAND_SIGMAS * sigma, MIN_BAND_M)
-        uv_own = uv_surface[piece == k]
+        uv_own = uv_surface[in_piece]
         low, high = uv_own.min(axis=0) - CELL_M, uv_own.max(axis=0) + CELL_M
         pick = (h > band) & (h <= top + REACH_M)
         pick[pick] &= np.all((uv_near[pick] >= low) & (uv_near[pick] <= high), axis=1)
