@@ -41,6 +41,9 @@ class RefineConfig:
     # recess) join no object in regrowth; 0: regrowth may cross walls (walls.py)
     structure_band_sigmas: float = 3.0  # a structural plane keeps its points this many robust
     # std of their distances deep (at most plane_distance_m); 0: all inliers (walls.py)
+    wall_noise_sigmas: float = 4.0  # a noisy wall takes in the points, off all planes, that the
+    # network calls no object, this many robust std of its own from it (at most three
+    # plane_distance_m), where that is past plane_distance_m; 0: RANSAC's band (walls.py)
     floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
     # (walls.py; 0: the network's floor labels stand wherever they are)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
@@ -148,6 +151,7 @@ class RefineConfig:
             "furniture_depth_m": 0.0,
             "plane_local_hypotheses": 0,
             "structure_band_sigmas": 0.0,
+            "wall_noise_sigmas": 0.0,
             "floor_label_max_m": 0.0,
             "table_surfaces": False,
             "table_top_m": 0.0,
@@ -197,6 +201,7 @@ class RefineConfig:
             "furniture_depth_m": (self.furniture_depth_m, 0.0, 10.0),
             "furniture_top_gap_m": (self.furniture_top_gap_m, 0.0, 10.0),
             "structure_band_sigmas": (self.structure_band_sigmas, 0.0, 100.0),
+            "wall_noise_sigmas": (self.wall_noise_sigmas, 0.0, 100.0),
             "wall_object_share": (self.wall_object_share, 0.0, 1.0),
             "bare_face_share": (self.bare_face_share, 0.0, 1.0),
             "face_fill_share": (self.face_fill_share, 0.0, 1.0),

@@ -103,6 +103,7 @@ def refinement_metrics(
             "table_points": p.table_points,
             "in_front_of_wall": p.on_wall,
             "beyond_band": p.off_band,
+            "noise_taken_in": p.noise_taken,
             "note": p.note,
         }
         for p in result.planes.planes

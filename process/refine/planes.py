@@ -25,6 +25,7 @@ from process.refine.walls import (
     furniture_fronts,
     objects_on_walls,
     tighten_bands,
+    widen_bands,
 )
 
 logger = logging.getLogger(__name__)
@@ -47,6 +48,7 @@ class Plane:
     table_points: int = 0  # inliers of a table surface (surfaces.py) that become table
     on_wall: int = 0  # inliers in front of a parallel wall behind, given back (walls.py)
     off_band: int = 0  # inliers beyond the plane's own noise band, given back (walls.py)
+    noise_taken: int = 0  # points of a noisy wall beyond RANSAC's band, taken in (walls.py)
     note: str = ""  # why a level plane that is not structural is (not) a table surface
     top: npt.NDArray[np.intp] | None = None  # a table surface's points, whatever their labels
 
@@ -118,6 +120,7 @@ def segment_planes(
     planes = planes[: cfg.max_planes] + tuple(p for p in planes[cfg.max_planes :] if p.label)
     planes = furniture_fronts(points, heights, planes, cfg)
     planes = tighten_bands(points, objects_on_walls(points, planes, cfg), cfg)
+    planes = widen_bands(points, planes, labels, cfg)
     planes, table = table_surfaces(points, planes, up_used, labels, cfg, density)
     structure = np.zeros(len(points), np.uint8)
     for plane in planes:

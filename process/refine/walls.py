@@ -23,6 +23,15 @@ noisy map keeps the full 2 cm. The Gaussian tail of the plane's own points goes 
 at 3 sigma): the network calls them structure or nothing, so they stay out of the objects
 unless an object's regrowth reaches them.
 
+A noisy wall's tail: on a map fused from raw depth the wall's own points spread past RANSAC's
+2 cm band (generator 5: robust sigma 0.9-1.5 cm, depth noise growing with the square of the
+distance), and the tail, which the network calls wall or nothing, is left off the plane; an
+object's regrowth then takes it (generator 5's office at 60k object points: 6,800 wall points
+regrown as clutter and table). Where a wall's own points spread so that `wall_noise_sigmas`
+robust standard deviations pass `plane_distance_m`, the wall takes in the points on no plane
+that the network calls no object, within that many sigmas of it (at most three
+`plane_distance_m`) and over its own extent (its 10 cm cells and their neighbours).
+
 Points behind a wall: an object in front of a wall never grows through it. Where a wall has a
 door or window recess, the recess's back and jambs stand 5-15 cm behind the wall plane, unlabelled
 (generator 3: a desk beside a door regrew 4,200 such points as table, sofa and monitor). Points
@@ -44,6 +53,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
@@ -223,6 +233,82 @@ def tighten_bands(
         note = f"{plane.note}; {note}" if plane.note else note
         out.append(replace(plane, removed=plane.removed[~off], off_band=int(off.sum()), note=note))
     return tuple(out)
+
+
+WIDE_CAP = 3.0  # a noisy wall's band: at most this many plane_distance_m
+EXTENT_CELL_M = 0.1  # a wall's extent: its cells of this size and their neighbours
+
+
+def widen_bands(
+    points: npt.NDArray[np.float32],
+    planes: tuple[Plane, ...],
+    labels: npt.NDArray[np.uint8] | None,
+    cfg: RefineConfig,
+) -> tuple[Plane, ...]:
+    """Return the planes, each noisy wall with the tail of its noise off every plane taken in.
+
+    The tail: points on no plane that the network (`labels`) calls structure or nothing,
+    within `wall_noise_sigmas` robust sigmas of the wall's inliers' median distance.
+    """
+    if labels is None or cfg.wall_noise_sigmas <= 0 or not planes:
+        return planes
+    free = labels < Label.TABLE
+    for plane in planes:
+        free[plane.indices] = False
+        free[plane.removed] = False
+    out = []
+    for plane in planes:
+        band = _wall_noise(points, plane, cfg)
+        if band is None:
+            out.append(plane)
+            continue
+        median, width = band
+        candidates = np.flatnonzero(free)
+        offset = points[candidates].astype(np.float64) @ plane.model[:3] + plane.model[3]
+        candidates = candidates[np.abs(offset - median) <= width]
+        taken = candidates[_over_cells(points, candidates, plane)]
+        if len(taken) == 0:
+            out.append(plane)
+            continue
+        free[taken] = False
+        note = f"band {width * 100:.1f} cm: {len(taken)} points of its noise taken in"
+        note = f"{plane.note}; {note}" if plane.note else note
+        removed = np.union1d(plane.removed, taken)
+        out.append(replace(plane, removed=removed, noise_taken=len(taken), note=note))
+    return tuple(out)
+
+
+def _wall_noise(
+    points: npt.NDArray[np.float32], plane: Plane, cfg: RefineConfig
+) -> tuple[float, float] | None:
+    """Return a noisy wall's (median distance, band half-width); None for any other plane."""
+    if plane.label != Label.WALL or len(plane.removed) < 10:
+        return None
+    own = points[plane.indices].astype(np.float64) @ plane.model[:3] + plane.model[3]
+    median = float(np.median(own))
+    sigma = 1.4826 * float(np.median(np.abs(own - median)))
+    width = min(cfg.wall_noise_sigmas * sigma, WIDE_CAP * cfg.plane_distance_m)
+    return (median, width) if width > cfg.plane_distance_m else None
+
+
+def _over_cells(
+    points: npt.NDArray[np.float32], candidates: npt.NDArray[np.intp], plane: Plane
+) -> npt.NDArray[np.bool_]:
+    """Return which candidates lie over the plane's own cells or their neighbours (u, v)."""
+    if len(candidates) == 0:
+        return np.zeros(0, bool)
+    own = plane_uv(points[plane.removed], plane.model)
+    origin = own.min(axis=0) - EXTENT_CELL_M  # one cell of margin for the neighbours
+    ij_own = ((own - origin) / EXTENT_CELL_M).astype(np.int64)
+    shape = tuple(int(v) + 2 for v in ij_own.max(axis=0))
+    grid = np.zeros(shape, bool)
+    grid[ij_own[:, 0], ij_own[:, 1]] = True
+    grid = ndimage.binary_dilation(grid, np.ones((3, 3), bool))
+    ij = np.floor((plane_uv(points[candidates], plane.model) - origin) / EXTENT_CELL_M)
+    ij = ij.astype(np.int64)
+    inside: npt.NDArray[np.bool_] = np.all((ij >= 0) & (ij < np.array(shape)), axis=1)
+    inside[inside] = grid[ij[inside, 0], ij[inside, 1]]
+    return inside
 
 
 def floor_said_above(
