@@ -119,7 +119,7 @@ def segment_planes(
     # the first planes, and a wall found later would otherwise be left to regrowth
     planes = planes[: cfg.max_planes] + tuple(p for p in planes[cfg.max_planes :] if p.label)
     planes = furniture_fronts(points, heights, planes, cfg)
-    planes = tighten_bands(points, objects_on_walls(points, planes, cfg), cfg)
+    planes = tighten_bands(points, objects_on_walls(points, planes, cfg, heights), cfg)
     planes = widen_bands(points, planes, labels, cfg)
     planes, table = table_surfaces(points, planes, up_used, labels, cfg, density)
     structure = np.zeros(len(points), np.uint8)

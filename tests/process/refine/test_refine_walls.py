@@ -264,3 +264,22 @@ def test_regrowth_leaves_a_noisy_walls_tail_to_the_wall() -> None:
     assert wide.phase_f1(scene.truth)["III"] > ransac.phase_f1(scene.truth)["III"] + 0.015
     section = refinement_metrics(wide, gt_cloud=None)
     assert sum(p["noise_taken_in"] for p in section["planes"]) > 15_000
+
+
+def test_a_layer_before_a_wall_from_floor_to_top_is_the_walls_own_face() -> None:
+    """A layer 5.5 cm before a thin wall (3 mm), 3 m wide: from the floor to the wall's top it is
+    the wall's own face (a chimney breast's, a raw-depth wall's front layer; generator 5's
+    office), 0.9 m tall at screen height it hangs on the wall. Without heights: both hang."""
+    rng = np.random.default_rng(2)
+    wall = _wall(0.0, (0.0, 4.0), 2.5)
+    wall[:, 1] += rng.normal(0.0, 0.003, len(wall))
+    room = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)  # the floor: the room is at y > 0
+    for top, bottom, hangs in ((2.5, 0.0, False), (2.0, 1.1, True)):
+        layer = _wall(0.055, (0.5, 3.5), top - bottom)
+        layer[:, 2] += bottom
+        points = np.concatenate([wall, layer, room]).astype(np.float32)
+        n, m = len(wall), len(layer)
+        planes = (_plane(points, np.arange(n), 0.0), _plane(points, np.arange(n, n + m), 0.055))
+        out = objects_on_walls(points, planes, RefineConfig(), points[:, 2].copy())
+        assert out[1].on_wall == (m if hangs else 0)
+        assert objects_on_walls(points, planes, RefineConfig())[1].on_wall == m  # no heights
