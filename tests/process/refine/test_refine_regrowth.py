@@ -453,7 +453,7 @@ def test_a_chair_seat_just_under_a_seated_person_is_not_lying_on_them(
 ) -> None:
     """The person's thighs 8 cm over a 40 cm seat: every seat point lies within 2 r1 (10 cm) of
     the person, none within r1 / 2, so the seat is no patch on the person (generator 3's room 2:
-    1,519 chair points had taken the person's class, F1 0.914 -> 0.933 without). A patch in the
+    1,519 chair points had taken the person's class). A patch in the
     thighs' sheet lies on it and is adopted."""
     thighs = grid_patch((0.0, 1.0), (0.0, 1.0), z=0.55)
     back = grid_patch((0.0, 1.0), (0.55, 1.5))[:, [0, 2, 1]]  # upright at y = 0
