@@ -31,6 +31,33 @@ def grid_of(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]
     return ij
 
 
+def over_footprint(
+    uv_own: npt.NDArray[np.float32],
+    uv: npt.NDArray[np.float32],
+    cell_m: float,
+    *,
+    diagonal: bool = False,
+) -> npt.NDArray[np.bool_]:
+    """Return which points (u, v) lie in a cell of `uv_own`'s points or next to one.
+
+    Next to: sharing a side with it, or with `diagonal` a corner too.
+    """
+    if len(uv) == 0 or len(uv_own) == 0:
+        return np.zeros(len(uv), bool)
+    from scipy import ndimage
+
+    origin = uv_own.min(axis=0) - cell_m  # one cell of margin for the neighbours
+    own = ((uv_own - origin) / cell_m).astype(np.int64)
+    shape = tuple(int(v) + 2 for v in own.max(axis=0))
+    grid = np.zeros(shape, bool)
+    grid[own[:, 0], own[:, 1]] = True
+    grid = ndimage.binary_dilation(grid, np.ones((3, 3), bool) if diagonal else None)
+    ij = np.floor((uv - origin) / cell_m).astype(np.int64)
+    inside: npt.NDArray[np.bool_] = np.all((ij >= 0) & (ij < np.array(shape)), axis=1)
+    inside[inside] = grid[ij[inside, 0], ij[inside, 1]]
+    return inside
+
+
 def connected_pieces(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]:
     """Return each point's connected piece (0..) on a grid of `cell_m` cells (8-connected).
 

@@ -312,11 +312,11 @@ def _adopt(
     between its back and front touches them only at its edges (28 % within r1 / 2) and is
     adopted. A chair under a seated person lies in the person's box and is outweighed, but only
     2-89 % of its points are near the person (generator 3: adoption alone turned 13,600 chair
-    points into person in one room). The
-    host must outweigh the cluster's own object, not the cluster alone, unless it is a table's
-    (table objects chain over gaps to the table patches on chairs beside them) and, with
-    `upright` (z along up), not taller than wide: a chair's leg beside a box on the floor is
-    part of a chair larger than the box, a table's leg beside a chair part of the table.
+    points into person in one room). The host must outweigh the cluster's own object, not the
+    cluster alone, unless it is a table's (table objects chain over gaps to the table patches on
+    chairs beside them) and, with `upright` (z along up), not taller than wide: a chair's leg
+    beside a box on the floor is part of a chair larger than the box, a table's leg beside a
+    chair part of the table.
     """
     if ratio <= 0:
         return []

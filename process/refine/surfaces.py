@@ -27,11 +27,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
-from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
+from process.refine.plane_grid import (
+    PIECE_CELL_M,
+    connected_pieces,
+    grid_of,
+    over_footprint,
+    plane_uv,
+)
 from process.refine.walls import facing, wall_band
 
 if TYPE_CHECKING:
@@ -204,13 +209,6 @@ def _on_a_body(
     band = np.flatnonzero(loose & (heights > floor_m + 0.1) & (heights < top - 0.1))
     if len(band) == 0:
         return False
-    uv = plane_uv(points[np.concatenate([members, band])], plane.model)
-    ij = np.floor((uv - uv[: len(members)].min(axis=0)) / _FOOTPRINT_CELL_M).astype(np.int64) + 1
-    own, under = ij[: len(members)], ij[len(members) :]
-    shape = tuple(int(v) + 2 for v in own.max(axis=0))
-    footprint = np.zeros(shape, bool)
-    footprint[own[:, 0], own[:, 1]] = True
-    footprint = ndimage.binary_dilation(footprint)
-    inside = np.all((under >= 0) & (under < np.array(shape)), axis=1)
-    count = int(footprint[under[inside, 0], under[inside, 1]].sum())
+    own, under = (plane_uv(points[i], plane.model) for i in (members, band))
+    count = int(over_footprint(own, under, _FOOTPRINT_CELL_M).sum())
     return count > cfg.table_solid_ratio * len(members)

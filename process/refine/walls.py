@@ -54,11 +54,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
-from process.refine.plane_grid import grid_of, plane_uv
+from process.refine.plane_grid import grid_of, over_footprint, plane_uv
 
 if TYPE_CHECKING:
     from process.refine.planes import Plane
@@ -141,11 +140,10 @@ FULL_HEIGHT = 0.9  # a layer spanning this share of the walls' height is a face 
 
 def _walls_height(heights: npt.NDArray[np.float32] | None, planes: tuple[Plane, ...]) -> float:
     """Return the tallest wall's span of heights (1st to 99th percentile; nan: unknown)."""
-    spans = [
-        float(np.ptp(np.percentile(heights[p.removed], [1.0, 99.0])))
-        for p in planes
-        if heights is not None and p.label == Label.WALL and len(p.removed)
-    ]
+    if heights is None:
+        return math.nan
+    walls = [p.removed for p in planes if p.label == Label.WALL and len(p.removed)]
+    spans = [float(np.ptp(np.percentile(heights[w], [1.0, 99.0]))) for w in walls]
     return max(spans, default=math.nan)
 
 
@@ -306,7 +304,8 @@ def widen_bands(
         candidates = np.flatnonzero(free)
         offset = points[candidates].astype(np.float64) @ plane.model[:3] + plane.model[3]
         candidates = candidates[np.abs(offset - median) <= width]
-        taken = candidates[_over_cells(points, candidates, plane)]
+        own, uv = (plane_uv(points[i], plane.model) for i in (plane.removed, candidates))
+        taken = candidates[over_footprint(own, uv, EXTENT_CELL_M, diagonal=True)]
         if len(taken) == 0:
             out.append(plane)
             continue
@@ -329,26 +328,6 @@ def _wall_noise(
     sigma = 1.4826 * float(np.median(np.abs(own - median)))
     width = min(cfg.wall_noise_sigmas * sigma, WIDE_CAP * cfg.plane_distance_m)
     return (median, width) if width > cfg.plane_distance_m else None
-
-
-def _over_cells(
-    points: npt.NDArray[np.float32], candidates: npt.NDArray[np.intp], plane: Plane
-) -> npt.NDArray[np.bool_]:
-    """Return which candidates lie over the plane's own cells or their neighbours (u, v)."""
-    if len(candidates) == 0:
-        return np.zeros(0, bool)
-    own = plane_uv(points[plane.removed], plane.model)
-    origin = own.min(axis=0) - EXTENT_CELL_M  # one cell of margin for the neighbours
-    ij_own = ((own - origin) / EXTENT_CELL_M).astype(np.int64)
-    shape = tuple(int(v) + 2 for v in ij_own.max(axis=0))
-    grid = np.zeros(shape, bool)
-    grid[ij_own[:, 0], ij_own[:, 1]] = True
-    grid = ndimage.binary_dilation(grid, np.ones((3, 3), bool))
-    ij = np.floor((plane_uv(points[candidates], plane.model) - origin) / EXTENT_CELL_M)
-    ij = ij.astype(np.int64)
-    inside: npt.NDArray[np.bool_] = np.all((ij >= 0) & (ij < np.array(shape)), axis=1)
-    inside[inside] = grid[ij[inside, 0], ij[inside, 1]]
-    return inside
 
 
 def floor_said_above(

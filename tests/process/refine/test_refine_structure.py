@@ -11,7 +11,7 @@ from capture.recording import Label
 from process.refine import RefineConfig
 from process.refine.cells import attached_clusters, sparse_inside_others
 from process.refine.dbscan import estimate_parameters
-from process.refine.plane_grid import wide_object_regions
+from process.refine.plane_grid import over_footprint, wide_object_regions
 from process.refine.planes import segment_planes
 
 CFG = RefineConfig(plane_min_points=2000, plane_max_remaining=100)
@@ -134,3 +134,13 @@ def test_a_sparse_object_standing_on_a_table_stays_though_specks_stretch_the_tab
     labels = np.r_[np.full(n_table, 4), np.full(len(box), 10)].astype(np.uint8)
     clusters = np.r_[np.full(n_table, 1), np.full(len(box), 2)].astype(np.int32)
     assert sparse_inside_others(points, labels, clusters, np.array([2])).tolist() == []
+
+
+def test_over_footprint_takes_the_cells_of_the_points_and_their_neighbours() -> None:
+    """Own points fill the 10 cm cell [0, 0.1)^2; a point in the cell beside it is over the
+    footprint, one in the cell at its corner only with diagonals, one two cells away never."""
+    own = np.array([[0.01, 0.01], [0.09, 0.09]], np.float32)
+    probe = np.array([[0.05, 0.05], [0.15, 0.05], [0.15, 0.15], [0.25, 0.05]], np.float32)
+    assert over_footprint(own, probe, 0.1).tolist() == [True, True, False, False]
+    assert over_footprint(own, probe, 0.1, diagonal=True).tolist() == [True, True, True, False]
+    assert over_footprint(own, probe[:0], 0.1).shape == (0,)
