@@ -95,8 +95,9 @@ class RefineConfig:
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
     nested_objects_yield: bool = True  # an object inside another class's box regrows only
     # the points the network gave its class (regrowth.py: a wrong-class patch stays small)
-    nested_adopt_ratio: float = 3.0  # ... and takes its host's class where the host object
-    # has this many times its points and it lies on the host, not just in its box (0: never)
+    nested_adopt_ratio: float = 1.5  # ... and takes its host's class where the host object
+    # has this many times its points and it lies on the host, not just in its box (0: never);
+    # 3 before the touch rule: a box's face the network calls chair has 1 / 1.7 of the box
     nested_patch_max_m: float = 0.7  # ... but only a patch nests: a cluster whose box has a
     # longer diagonal is an object of its own (a chair under a seated person); 0: any size
     table_top_m: float = 0.02  # regrowth: a table's box reaches this far above its top,
