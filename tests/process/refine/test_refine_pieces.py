@@ -70,11 +70,62 @@ def test_a_torsos_back_the_chairs_label_bled_onto_goes_back_to_the_person() -> N
     assert set(vote.relabelled.tolist()) == set(np.flatnonzero(labels != vote.labels).tolist())
 
 
-def test_a_piece_that_is_its_objects_largest_stays() -> None:
-    """The same face in a cluster of its own is an object (a cushion on a sofa's back)."""
-    points, labels, clusters, back, _ = _seated_back()
+def test_a_piece_that_is_its_objects_largest_stays_unless_it_lies_between_the_two() -> None:
+    """The same face in a cluster of its own is an object (a cushion on a sofa's back) when
+    nothing of its class lies behind it; 4 cm before the chair's back it is the torso's."""
+    points, labels, clusters, back, n_chair = _seated_back()
     clusters[back] = 3
-    assert (piece_vote(points, labels, clusters).labels == labels).all()
+    between = piece_vote(points, labels, clusters)
+    assert (between.labels[back] == PERSON).all() and (between.labels[:n_chair] == CHAIR).all()
+    away = points.copy()
+    away[:n_chair, 0] -= 0.1  # the chair's back 14 cm behind the face: past GAP_M
+    assert (piece_vote(away, labels, clusters).labels == labels).all()
+    del_chair = np.arange(len(points)) >= n_chair  # no chair at all: a cushion
+    alone = piece_vote(points[del_chair], labels[del_chair], clusters[del_chair])
+    assert (alone.labels == labels[del_chair]).all()
+
+
+def _chair_back_behind_a_torso() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32],
+                                           npt.NDArray[np.bool_]]:  # fmt: skip
+    """A chair's back (a board 3 cm thick) 4 cm behind a torso; the person's label covers the
+    board's whole front face, which DBSCAN left a cluster of its own (generator 4's kitchen).
+
+    The face is as large as the rest of the board: the largest piece of its cluster, and more
+    than RATIO times the piece it touches. Returns points, labels, clusters, the face's mask.
+    """
+    board = _box((-0.23, 0.0, 0.5), (-0.20, 0.44, 0.92))
+    face, rest = board[1], np.vstack(board[:1] + board[2:])  # +x: toward the person
+    torso = np.vstack(_box((-0.16, 0.03, 0.5), (0.06, 0.41, 1.1)))
+    points = np.vstack([rest, face, torso])
+    points += np.random.default_rng(3).normal(0.0, 0.002, points.shape)
+    labels = np.r_[np.full(len(rest), CHAIR), np.full(len(face) + len(torso), PERSON)]
+    clusters = np.r_[np.full(len(rest), 1), np.full(len(face), 3), np.full(len(torso), 2)]
+    is_face = np.zeros(len(points), bool)
+    is_face[len(rest) : len(rest) + len(face)] = True
+    return points, labels.astype(np.uint8), clusters.astype(np.int32), is_face
+
+
+def test_a_chair_backs_face_the_persons_label_covers_goes_back_to_the_chair(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    points, labels, clusters, face = _chair_back_behind_a_torso()
+    assert face.sum() > 1500 and face.sum() > pieces.RATIO * (labels == CHAIR).sum()
+    vote = piece_vote(points, labels, clusters)
+    assert (vote.labels[face] == CHAIR).all()
+    assert (vote.labels[~face] == labels[~face]).all()  # the torso stays the person's
+    monkeypatch.setattr(pieces, "GAP_M", 0.03)  # the torso 4 cm away: not between the two
+    assert (piece_vote(points, labels, clusters).labels[face] == PERSON).all()
+
+
+def test_only_a_flat_piece_lies_between(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The face's least variance is its noise (2 mm): under FLAT of its total, a face; held to
+    a bound below that, the same points are a body, whose sides mean nothing, and stay."""
+    points, labels, clusters, face = _chair_back_behind_a_torso()
+    centred = points[face] - points[face].mean(axis=0)
+    variance = np.linalg.eigvalsh(centred.T @ centred)
+    assert 1e-5 < variance[0] / variance.sum() < pieces.FLAT
+    monkeypatch.setattr(pieces, "FLAT", 1e-5)
+    assert (piece_vote(points, labels, clusters).labels[face] == PERSON).all()
 
 
 def test_past_max_points_the_vote_runs_on_class_cells_with_the_same_verdict() -> None:
