@@ -143,8 +143,10 @@ def _vote(
     touching = np.zeros(len(xyz), bool)
     touching[ci[to_top]] = True
     out = own.copy()
+    order = np.argsort(piece, kind="stable")  # each piece's rows, without a pass per piece
+    start = np.concatenate([[0], np.cumsum(size)])
     for p in np.flatnonzero(bordered):
-        rows = np.flatnonzero(piece == p)
+        rows = order[start[p] : start[p + 1]]
         if not _enclosed(xyz[rows], touching[rows]):
             continue
         if bled[p] or _between(xyz, rows, own == label[p], own == other[p]):
