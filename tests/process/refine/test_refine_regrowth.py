@@ -247,6 +247,35 @@ def test_a_box_face_the_network_calls_chair_is_the_boxs_at_the_default_ratio() -
     assert (old.labels[face] == Label.CHAIR).all()
 
 
+def test_a_monitor_between_clutter_piles_is_not_nested_in_their_chained_object() -> None:
+    """A 30 cm monitor 4 cm before two piles of books and between two boxes on a desk: the four
+    clutter clusters chain into one object whose box holds the monitor, but no one of them
+    does, and clutter is many small things (TUM fr1_rpy: the monitor went to clutter)."""
+    boxes = [((0.0, 0.0, 0.0), (0.3, 0.3, 0.3)), ((0.2, 0.2, 0.0), (0.48, 0.3, 0.45)),
+             ((0.5, 0.2, 0.0), (0.8, 0.3, 0.45)), ((0.68, 0.0, 0.0), (0.98, 0.3, 0.3))]  # fmt: skip
+    piles = [_box_surface(*box) for box in boxes]
+    monitor = _box_surface((0.34, 0.17, 0.0), (0.64, 0.2, 0.4))
+    points = np.concatenate([*piles, monitor]).astype(np.float32)
+    n_piles = sum(map(len, piles))
+    labels = np.r_[np.full(n_piles, Label.CLUTTER), np.full(len(monitor), Label.TV_MONITOR)]
+    clusters = np.concatenate([np.full(len(p), i + 1) for i, p in enumerate([*piles, monitor])])
+    kw = {"r1_m": {Label.CLUTTER: 0.05, Label.TV_MONITOR: 0.05}, "gap_m": 0.15,
+          "up": np.array([0.0, 0.0, 1.0]), "nest": True, "adopt_ratio": 1.5,
+          "patch_max_m": 0.7}  # fmt: skip
+    labels, clusters = labels.astype(np.uint8), clusters.astype(np.int32)
+    grown = regrow(points, labels, clusters, prior=labels, **kw)  # type: ignore[arg-type]
+    assert len(set(grown.objects[i] for i in (1, 2, 3, 4))) == 1  # one chained clutter object
+    assert (grown.labels[n_piles:] == Label.TV_MONITOR).all() and len(grown.adopted) == 0
+    # a chair-labelled patch on the back of one pile is still that pile's (its own box holds it)
+    patch = (points[:, 1] > 0.27) & (points[:, 0] > 0.55) & (points[:, 0] < 0.75)
+    patch &= (points[:, 2] < 0.3) & (clusters == 3)
+    on_pile = np.where(patch, Label.CHAIR, labels).astype(np.uint8)
+    kw["r1_m"] = {**kw["r1_m"], Label.CHAIR: 0.05}  # type: ignore[dict-item]
+    split = np.where(patch, 9, clusters).astype(np.int32)
+    taken = regrow(points, on_pile, split, prior=on_pile, **kw)  # type: ignore[arg-type]
+    assert patch.sum() > 50 and (taken.labels[patch] == Label.CLUTTER).all()
+
+
 def test_a_cluster_inside_a_hosts_box_but_not_on_it_keeps_its_class() -> None:
     """A chair under a seated person: in the person's box and outweighed, but apart from them.
 
