@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from capture.recording import Label
 
@@ -44,8 +45,6 @@ def over_footprint(
     """
     if len(uv) == 0 or len(uv_own) == 0:
         return np.zeros(len(uv), bool)
-    from scipy import ndimage
-
     origin = uv_own.min(axis=0) - cell_m  # one cell of margin for the neighbours
     own = ((uv_own - origin) / cell_m).astype(np.int64)
     shape = tuple(int(v) + 2 for v in own.max(axis=0))
@@ -64,8 +63,6 @@ def connected_pieces(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[
     The grid grows past `cell_m` where the points span over 2,000 cells: RANSAC's infinite
     plane takes stray inliers metres away.
     """
-    from scipy import ndimage
-
     if len(uv) == 0:
         return np.zeros(0, np.int64)
     extent = float((uv.max(axis=0) - uv.min(axis=0)).max())
@@ -96,8 +93,6 @@ def wide_object_regions(
     opening of the cells where object labels are the majority, by a square of `width_m`,
     removes the bands and keeps the wide regions: those stay objects.
     """
-    from scipy import ndimage
-
     out = np.zeros(len(uv), bool)
     is_object = labels >= Label.TABLE
     if not is_object.any() or width_m <= 0:

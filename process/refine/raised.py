@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 from scipy.spatial import cKDTree
+from scipy.stats import median_abs_deviation
 
 from capture.recording import OBJECT_LABELS, Label
 from process.refine.graph import class_pieces
@@ -123,7 +124,7 @@ def _above(
         probe = np.linspace(0, len(members) - 1, min(len(members), SIGMA_PROBES)).astype(np.intp)
         _, near = cKDTree(xyz).query(xyz[probe], NEIGHBOURS + 1)
         local = own[probe] - np.median(own[near], axis=1)
-        sigma = 1.4826 * float(np.median(np.abs(local - np.median(local))))
+        sigma = float(median_abs_deviation(local, scale="normal"))
         top = float(np.percentile(own, 75))
         band = top + max(BAND_SIGMAS * sigma, MIN_BAND_M)
         uv_own = uv_surface[in_piece]

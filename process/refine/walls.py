@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from scipy.stats import median_abs_deviation
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
@@ -131,8 +132,7 @@ def wall_band(
 
 def _noise_band(offset: npt.NDArray[np.float64], sigmas: float) -> float:
     """Return the median of a plane's point distances plus `sigmas` robust sigmas (1.4826 MAD)."""
-    median = float(np.median(offset))
-    return median + sigmas * 1.4826 * float(np.median(np.abs(offset - median)))
+    return float(np.median(offset)) + sigmas * float(median_abs_deviation(offset, scale="normal"))
 
 
 FULL_HEIGHT = 0.9  # a layer spanning this share of the walls' height is a face of the wall
@@ -325,7 +325,7 @@ def _wall_noise(
         return None
     own = points[plane.indices].astype(np.float64) @ plane.model[:3] + plane.model[3]
     median = float(np.median(own))
-    sigma = 1.4826 * float(np.median(np.abs(own - median)))
+    sigma = float(median_abs_deviation(own, scale="normal"))
     width = min(cfg.wall_noise_sigmas * sigma, WIDE_CAP * cfg.plane_distance_m)
     return (median, width) if width > cfg.plane_distance_m else None
 
