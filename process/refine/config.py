@@ -63,9 +63,10 @@ class RefineConfig:
     table_tolerance_deg: float = 15.0  # ... and level to this (a fused desk tilts with drift);
     # a piece labelled an object class on less than this share of its points ...
     table_min_object_share: float = 0.1
-    # ... over this many times its points unlabelled under it is a cabinet's or counter's top
-    # (generator 5: bare kitchen counters became table, F1 0.81 -> 0.66; surfaces.py)
-    table_solid_ratio: float = 1.5
+    # ... over this many times its points unlabelled under it per metre of the body under it (10
+    # cm over the floor to 10 cm under the top) is a cabinet's or counter's top (generator 5:
+    # bare kitchen counters and a TV's low cabinet became table; surfaces.py)
+    table_solid_per_m: float = 2.5
     table_other_cell_m: float = 0.2  # ... but cells this wide labelled more chair, person,
     # plant or sofa than desk stay out of it (0: none; surfaces.py)
     up: tuple[float, float, float] | None = None  # gravity-up in the cloud's frame; None = find
@@ -211,7 +212,7 @@ class RefineConfig:
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
             "table_min_object_share": (self.table_min_object_share, 0.0, 1.0),
-            "table_solid_ratio": (self.table_solid_ratio, 0.0, 1000.0),
+            "table_solid_per_m": (self.table_solid_per_m, 0.0, 1000.0),
             "table_other_cell_m": (self.table_other_cell_m, 0.0, 10.0),
             "cluster_voxel_m": (self.cluster_voxel_m, 0.0, 1.0),
             "max_cells": (self.max_cells, 1000, 10**9),
