@@ -65,6 +65,8 @@ class PlaneSegmentation:
     density_per_m2: float = math.nan  # the cloud's surface density it was derived from
     table: npt.NDArray[np.bool_] | None = None  # (N,) points of table surfaces, made table
     not_floor: npt.NDArray[np.bool_] | None = None  # (N,) "floor" well above it (walls.py)
+    faces_only: tuple[Plane, ...] = ()  # planes past max_planes that are no structure: only
+    # bare faces are looked for on them (faces.py)
 
     def object_labels(self, labels: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
         """Return the network's labels, table surfaces table, "floor" above the floor 0."""
@@ -117,6 +119,7 @@ def segment_planes(
     )
     # past max_planes only structure counts: in a furnished room desk, seat and sofa tops use up
     # the first planes, and a wall found later would otherwise be left to regrowth
+    extra = tuple(p for p in planes[cfg.max_planes :] if not p.label)
     planes = planes[: cfg.max_planes] + tuple(p for p in planes[cfg.max_planes :] if p.label)
     planes = furniture_fronts(points, heights, planes, cfg)
     planes = tighten_bands(points, objects_on_walls(points, planes, cfg, heights), cfg)
@@ -128,7 +131,7 @@ def segment_planes(
     logger.debug("planes (Min %d): %s", min_points, [(p.label, len(p.indices)) for p in planes])
     not_floor = floor_said_above(heights, planes, labels, structure > 0, cfg)
     return PlaneSegmentation(
-        planes, structure, up_used, source, min_points, density, table, not_floor
+        planes, structure, up_used, source, min_points, density, table, not_floor, extra
     )
 
 
