@@ -108,6 +108,14 @@ def refinement_metrics(
         }
         for p in result.planes.planes
     ]
+    section["planes_past_max"] = [  # no structure: looked at for bare faces only (faces.py)
+        {
+            "inliers": len(p.indices),
+            "normal": [float(v) for v in p.model[:3]],
+            "offset_m": float(p.model[3]),
+        }
+        for p in result.planes.faces_only
+    ]
     nf = result.planes.not_floor
     section["points"] = {
         "input": len(result.fused),

@@ -138,6 +138,11 @@ def test_a_bare_top_found_past_max_planes_is_still_a_face() -> None:
     assert [p.label for p in out.planes.planes] == [Label.FLOOR, Label.WALL]
     assert len(out.planes.faces_only) == 1
     assert is_top[out.planes.faces_only[0].indices].mean() > 0.9  # and the front's top row
+    section = refinement_metrics(out, gt_cloud=None)
+    assert [p["inliers"] for p in section["planes_past_max"]] == [
+        len(out.planes.faces_only[0].indices)
+    ]
+    assert section["points"]["bare_faces_left_out"] >= 0.9 * is_top.sum()
     assert (out.labels_iii[is_top] == Label.CLUTTER).sum() <= near.sum()
     assert (out.labels_iii[is_box] == Label.CLUTTER).mean() > 0.9
     off = refine(cloud, dataclasses.replace(one, bare_face_share=0.0), up=UP)
