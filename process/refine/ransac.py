@@ -12,7 +12,10 @@ it scores its hypotheses one at a time and, on several threads, each thread with
 stream, so its plane depended on the scheduling (we ran it on one thread, a global setting). Here
 every hypothesis comes from the caller's NumPy generator and all of them are scored in (hypotheses
 x points) products: on the 332k office, 20,000 sampled points and 300 + 300 hypotheses, ~25 ms per
-plane against Open3D's 84 ms for its 300 plus 40 ms for the local ones.
+plane against Open3D's 84 ms for its 300 plus 40 ms for the local ones. Scored preemptively
+(Nister 2003: all on an even tenth of the sample, the best 64 on all of it), the planes step of
+that office takes 0.46-0.58 s instead of 0.60-0.69 s, and all 58 suite clouds and TUM fr1_rpy's
+refined map come out the same.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 _CHUNK = 64  # hypotheses scored per product: a (64 x points) float32 block, 5 MB at 20k
+_PRE_POINTS = 2000  # a sample of this many points or more scores its hypotheses preemptively
+_PRE_KEEP = 64  # ... and keeps this many for the whole sample
 
 
 def best_plane(
@@ -45,9 +50,16 @@ def best_plane(
     if not hypotheses:
         raise ValueError("best_plane needs at least one hypothesis (uniform or local)")
     models = np.concatenate(hypotheses)
-    counts = inlier_counts(sample, models, distance_m)
+    keep = np.arange(len(models))
+    stride = len(sample) // _PRE_POINTS
+    if stride >= 4 and len(models) > _PRE_KEEP:
+        # preemptive scoring (Nister 2003): every hypothesis on an even tenth of the sample,
+        # the best _PRE_KEEP of them on all of it
+        rough = inlier_counts(sample[::stride], models, distance_m)
+        keep = np.sort(np.argsort(-rough, kind="stable")[:_PRE_KEEP])
+    counts = inlier_counts(sample, models[keep], distance_m)
     best = int(np.argmax(counts))  # the first drawn of equal counts
-    return models[best], int(counts[best])
+    return models[keep[best]], int(counts[best])
 
 
 def uniform_planes(

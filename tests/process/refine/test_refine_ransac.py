@@ -61,3 +61,21 @@ def test_uniform_draws_alone_find_it_too_and_no_hypothesis_is_an_error() -> None
         best_plane(points[:2], uniform=10, local=10, distance_m=0.02, rng=np.random.default_rng())
     with pytest.raises(ValueError, match="at least one hypothesis"):
         best_plane(points, uniform=0, local=0, distance_m=0.02, rng=np.random.default_rng())
+
+
+def test_preemptive_scoring_keeps_the_plane_all_hypotheses_scored_in_full_give(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """On a sample of 20,000 points the hypotheses are scored on an even tenth first and the
+    best 64 on all of it: the same plane and count as scoring all 600 on every point."""
+    import process.refine.ransac as ransac
+
+    rng = np.random.default_rng(5)
+    sample = np.concatenate([_floor_and_clutter(rng) for _ in range(2)])  # 20,000 points
+    quick = best_plane(
+        sample, uniform=300, local=300, distance_m=0.02, rng=np.random.default_rng(1)
+    )
+    monkeypatch.setattr(ransac, "_PRE_KEEP", 10**6)  # every hypothesis on every point
+    full = best_plane(sample, uniform=300, local=300, distance_m=0.02, rng=np.random.default_rng(1))
+    np.testing.assert_array_equal(quick[0], full[0])
+    assert quick[1] == full[1] > 0.55 * len(sample)
