@@ -28,8 +28,9 @@ class RefineConfig:
     # compete with RANSAC's (ransac.py: finds walls of a few % of the points); 0: off
     plane_sample_points: int = 20_000  # RANSAC hypotheses are scored on this many random points
     max_planes: int = 8  # planes tried at most, structural or not ...
-    structure_planes: int = 2  # ... then up to this many more, kept only as walls, floors or
-    # ceilings (generator 4: desks, seats and sofas use up the 8 and walls were left out)
+    structure_planes: int = 4  # ... then up to this many more, kept only as walls, floors or
+    # ceilings (generator 4: desks, seats and sofas use up the 8 and walls were left out), or
+    # for bare faces (faces.py; 4 rather than 2: generator 5's kitchen at 60k 0.852 -> 0.872)
     horizontal_tolerance_deg: float = 10.0  # a normal this close to `up` is horizontal
     structure_height_tol_m: float = 0.3  # floor/ceiling: this close to the lowest/highest points
     wall_min_height_m: float = 1.5  # a wall rises this high; floor and ceiling are this far apart
