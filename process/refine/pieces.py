@@ -29,7 +29,7 @@ lies under them, with no more of the person beneath it; a cushion has no more of
 behind it. Where the bleed swapped both faces, the person's back labelled chair and the chair's
 front person, the chair's front has no person behind it until the person's back is given back:
 the vote runs twice, the second time for faces between two classes only (generator 4's office
-at 200k: 1,838 points of the chair's front, 0.940 -> 0.950). A second pass of the first rule
+at 200k: 1,838 points of the chair's front, 0.940 -> 0.9496). A second pass of the first rule
 would run on: pieces the first freed of a contact of another class become bordered (a seated
 person's legs on a sofa, generator 4's living room at 60k: 271 points).
 
