@@ -54,7 +54,7 @@ def bare_faces(
     out = np.zeros(len(points), bool)
     if cfg.bare_face_share <= 0:
         return out
-    for face in _faces(points, planes, cfg, level_too=True):
+    for face in _faces(points, planes, cfg, level_too=True, past_max=True):
         if np.count_nonzero(labels[face] >= Label.TABLE) < cfg.bare_face_share * len(face):
             out[face] = True
     return out
@@ -104,6 +104,7 @@ def _faces(
     cfg: RefineConfig,
     *,
     level_too: bool = False,
+    past_max: bool = False,
 ) -> Iterator[npt.NDArray[np.intp]]:
     """Yield the inliers of each large piece of each upright plane that is no structure.
 
@@ -112,6 +113,7 @@ def _faces(
     stand's top, 0.6 m^2, was no face).
 
     `level_too`: of each level one too (a cabinet's top); table surfaces are labelled table.
+    `past_max`: of the planes found past max_planes too (`PlaneSegmentation.faces_only`).
     """
     if planes.up is None:
         return
@@ -120,7 +122,7 @@ def _faces(
     least = float(planes.min_points)  # a plane's Min, or face_min_area_m2 if that is fewer
     if math.isfinite(planes.density_per_m2):
         least = min(least, cfg.face_min_area_m2 * planes.density_per_m2)
-    for plane in planes.planes + (planes.faces_only if level_too else ()):
+    for plane in planes.planes + (planes.faces_only if past_max else ()):
         cosine = abs(float(plane.model[:3] @ planes.up))
         if plane.label or (cosine > upright and not (level_too and cosine >= level)):
             continue

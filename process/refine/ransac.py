@@ -53,8 +53,8 @@ def best_plane(
     keep = np.arange(len(models))
     stride = len(sample) // _PRE_POINTS
     if stride >= 4 and len(models) > _PRE_KEEP:
-        # preemptive scoring (Nister 2003): every hypothesis on an even tenth of the sample,
-        # the best _PRE_KEEP of them on all of it
+        # preemptive scoring (Nister 2003): every hypothesis on about _PRE_POINTS evenly
+        # spaced points of the sample, the best _PRE_KEEP of them on all of it
         rough = inlier_counts(sample[::stride], models, distance_m)
         keep = np.sort(np.argsort(-rough, kind="stable")[:_PRE_KEEP])
     counts = inlier_counts(sample, models[keep], distance_m)

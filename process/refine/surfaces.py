@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from process.refine.planes import Plane
 
 _FOOTPRINT_CELL_M = 0.05  # cells of a table top's footprint (_on_a_body)
+_BODY_MARGIN_M = 0.1  # a body under a top is counted this far over the floor and under the top
 TO_TABLE = (Label.UNLABELLED, Label.CEILING, Label.FLOOR, Label.WALL, Label.CLUTTER)
 
 
@@ -208,10 +209,10 @@ def _on_a_body(
     """
     if float(np.mean(labels[members] >= Label.TABLE)) >= cfg.table_min_object_share:
         return False
-    top = float(np.median(heights[members]))
-    band = np.flatnonzero(loose & (heights > floor_m + 0.1) & (heights < top - 0.1))
+    low, high = floor_m + _BODY_MARGIN_M, float(np.median(heights[members])) - _BODY_MARGIN_M
+    band = np.flatnonzero(loose & (heights > low) & (heights < high))
     if len(band) == 0:
         return False
     own, under = (plane_uv(points[i], plane.model) for i in (members, band))
     count = int(over_footprint(own, under, _FOOTPRINT_CELL_M).sum())
-    return count > cfg.table_solid_per_m * len(members) * (top - floor_m - 0.2)
+    return count > cfg.table_solid_per_m * len(members) * (high - low)
