@@ -110,6 +110,9 @@ class RefineConfig:
     # stand on a table's top, min_cluster_points of them, become an object (tabletop.py)
     orphan_adoption: bool = True  # then a segment still 0 that the network labelled (a chair's
     # back it called floor) joins the one object class it touches, not a table (orphans.py)
+    rejoin_strays: bool = True  # after regrowth, a point the network calls plant that SOR or
+    # phase II left out, not alone, joins the plant's refined points within r1, in waves:
+    # sparse foliage is no noise (outliers.py)
     raised_vote: bool = True  # then table-labelled pieces above a table surface's noise band
     # (a monitor's base plate, forearms on a desk) take the class of the object they touch,
     # when that is most of their contacts and at least their size (raised.py)
@@ -163,6 +166,7 @@ class RefineConfig:
             "seam_vote_m": 0.0,
             "piece_vote": False,
             "raised_vote": False,
+            "rejoin_strays": False,
             "orphan_adoption": False,
             "object_bridge_m": 0.0,
             "regrow_structure": True,

@@ -134,7 +134,10 @@ def refinement_metrics(
         "seam_relabelled": len(result.seams),
         "piece_relabelled": len(result.pieces),
         "raised_relabelled": len(result.raised),
+        "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
+        "strays_rejoined": len(result.strays),
+        "strays_rejoined_from_sor": int(np.isin(result.strays, result.sor_outliers).sum()),
         "final": int(result.kept.sum()),
     }
     section["seconds"] = dict(result.seconds)

@@ -21,7 +21,7 @@ from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, fill_faces
 from process.refine.orphans import adopt_orphans
-from process.refine.outliers import sor_inliers
+from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.raised import raised_off_tables
@@ -53,7 +53,7 @@ class RefineResult:
 
     fused: LabelledCloud  # the input (phase I)
     planes: PlaneSegmentation
-    sor_outliers: npt.NDArray[np.intp]  # input indices that SOR removed
+    sor_outliers: npt.NDArray[np.intp]  # input indices that SOR removed (some rejoin later)
     method: int
     dbscan: dict[int, ClassClustering]  # per class label
     shared: ClassClustering | None  # method 1: the one estimate for all classes
@@ -81,13 +81,19 @@ class RefineResult:
     orphans: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of unlabelled segments the network saw, given the class they touch (orphans.py)
     raised: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
-    # input indices of table pieces above a table's top given the object they touch (raised.py)
+    # input indices of table pieces above a table's top given the object they touch, and of
+    # monitor points under a top given the table (raised.py)
+    sunk: int = 0  # of them, the points under a top
+    strays: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of plant-labelled points SOR or phase II left out that rejoined a plant
+    # after regrowth (outliers.py; SOR's among them survive)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
-        """Return the mask of input points that survive (all but SOR outliers)."""
+        """Return the mask of input points that survive (all but SOR outliers that stay out)."""
         keep = np.ones(len(self.fused), bool)
         keep[self.sor_outliers] = False
+        keep[self.strays] = True
         return keep
 
     def final(self) -> LabelledCloud:
@@ -171,7 +177,7 @@ def refine(
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
-    filled = orphans = np.zeros(0, np.intp)
+    filled = orphans = strays_rejoined = np.zeros(0, np.intp)
     tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -228,12 +234,22 @@ def refine(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels
             )
             regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
+        if cfg.rejoin_strays:  # sparse foliage SOR and DBSCAN took for noise, to its plant
+            left = np.zeros(len(cloud), bool)
+            left[objects[~keep_out]] = True  # not behind a wall, not on a bare face
+            left &= labels_iii == 0
+            strays = np.union1d(outliers, np.flatnonzero(left))
+            strays_rejoined = rejoin_strays(
+                cloud.points, strays, network, labels_iii, clusters_iii, r1
+            )
+            regrown = np.union1d(regrown, strays_rejoined)  # shown with the regrown points
     lap("regrowth")
-    raised = np.zeros(0, np.intp)
+    raised, sunk = np.zeros(0, np.intp), 0
     if cfg.raised_vote and planes.up is not None:
         tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
         lifted = raised_off_tables(cloud.points, labels_iii, clusters_iii, tops, planes.up)
         labels_iii, clusters_iii, raised = lifted.labels, lifted.clusters, lifted.relabelled
+        sunk = lifted.sunk
         lap("raised")
     seams = np.zeros(0, np.intp)
     neighbours = None
@@ -257,7 +273,8 @@ def refine(
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised,
+        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
+        strays_rejoined,
     )  # fmt: skip
 
 

@@ -100,10 +100,11 @@ def test_refine_file_writes_every_surviving_point_and_the_metrics(
     assert {"k", "eps_m", "min_pts"} <= set(section["dbscan"]["chair"])
     refined = read_cloud(tmp_path / "out" / "map_refined.ply")
     assert refined.clusters is not None
-    assert (
+    points = section["points"]
+    assert (  # SOR's outliers are left out, but those that rejoined a plant (outliers.py)
         len(refined)
-        == section["points"]["final"]
-        == len(office.cloud) - section["points"]["sor_outliers"]
+        == points["final"]
+        == len(office.cloud) - points["sor_outliers"] + points["strays_rejoined_from_sor"]
     )
     kept = np.isin(office.cloud.points.view("V12").ravel(), refined.points.view("V12").ravel())
     assert kept.sum() == len(refined)  # at their input positions

@@ -170,3 +170,44 @@ def test_refine_gives_the_plate_and_foot_back_to_the_monitor() -> None:
     off = refine(cloud, dataclasses.replace(cfg, raised_vote=False), up=UP)
     assert (off.labels_iii[foot] == Label.TABLE).mean() > 0.9
     assert not RefineConfig.paper().raised_vote
+
+
+def test_monitor_labels_under_a_desk_top_go_to_the_desk() -> None:
+    """The monitor's label bled through the desk onto its underside, 3 cm under the top, and
+    onto the top around the plate. Under the top's band, over its footprint, it is the desk's;
+    within the band (the plate's rim) it stays. Clutter stays clutter: books on a shelf 4 cm
+    under a board that passes for a table's top, a box on the floor; so does a person's knee."""
+    parts = _desk_with_monitor(np.random.default_rng(3))
+    underside = parts["desk"].copy()
+    underside[:, 2] -= 0.03
+    floor_box = _box((1.2, 0.2, DESK_Z - 0.7), (1.4, 0.4, DESK_Z - 0.55))
+    off_desk = _box((1.8, 0.2, DESK_Z - 0.04), (1.9, 0.3, DESK_Z - 0.02))  # beside, lower
+    knee = _box((0.8, 0.3, DESK_Z - 0.05), (1.0, 0.5, DESK_Z - 0.04))  # a person's knee
+    books = _box((1.2, 0.5, DESK_Z - 0.3), (1.5, 0.7, DESK_Z - 0.04))  # on a shelf under it
+    points, at = _scene(
+        {**parts, "underside": underside, "floor_box": floor_box, "off": off_desk, "knee": knee,
+         "books": books}
+    )  # fmt: skip
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    for name in ("screen", "stand", "plate"):
+        labels[at[name]] = Label.TV_MONITOR
+    bled = at["underside"][np.abs(points[at["underside"], :2] - [0.39, 0.41]).max(axis=1) < 0.2]
+    ring = at["desk"][np.abs(points[at["desk"], :2] - [0.39, 0.41]).max(axis=1) < 0.2]
+    labels[bled] = labels[ring] = Label.TV_MONITOR
+    labels[at["floor_box"]] = labels[at["books"]] = Label.CLUTTER
+    labels[at["off"]] = Label.TV_MONITOR
+    labels[at["knee"]] = Label.PERSON
+    clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
+    tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), at["desk"])]
+    vote = raised_off_tables(points, labels, clusters, tops, UP)
+    assert (vote.labels[bled] == Label.TABLE).all()
+    assert (vote.clusters[bled] == 1).all()  # into the desk's object
+    # within the band the ring stays, but for its noise tail under the band (desk, rightly)
+    assert set(vote.relabelled) <= set(bled) | set(ring)
+    assert vote.sunk == len(vote.relabelled)
+    assert (vote.labels[ring] == Label.TV_MONITOR).mean() > 0.95
+    assert (vote.labels[at["plate"]] == Label.TV_MONITOR).all()
+    assert (vote.labels[at["floor_box"]] == Label.CLUTTER).all()  # far under the top
+    assert (vote.labels[at["books"]] == Label.CLUTTER).all()
+    assert (vote.labels[at["off"]] == Label.TV_MONITOR).all()  # beyond the desk's footprint
+    assert (vote.labels[at["knee"]] == Label.PERSON).all()

@@ -1,0 +1,70 @@
+"""Strays rejoining their class's object after regrowth (process/refine/outliers.py)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from capture.recording import Label
+from process.cloud import LabelledCloud
+from process.refine import RefineConfig, refine
+from process.refine.job import refinement_metrics
+from process.refine.outliers import rejoin_strays
+
+
+def _plant(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A pot's wall every 5 mm (0.15 m across, 0.25 m high); 100 leaves of 4 points around its
+    top, each leaf 1 cm across, 5-7 cm from the next: sparse foliage."""
+    angle, z = np.meshgrid(np.linspace(0, 2 * np.pi, 95, endpoint=False), np.arange(0, 0.25, 0.005))
+    pot = np.column_stack([0.075 * np.cos(angle.ravel()), 0.075 * np.sin(angle.ravel()), z.ravel()])
+    direction = rng.normal(size=(100, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centres = direction * rng.uniform(0.1, 0.35, (100, 1)) + [0.0, 0.0, 0.45]
+    leaves = np.repeat(centres, 4, axis=0) + rng.uniform(-0.005, 0.005, (400, 3))
+    return pot.astype(np.float32), leaves.astype(np.float32)
+
+
+def test_a_sprig_of_strays_rejoins_its_plant_in_waves_and_lone_points_stay_out() -> None:
+    stem = np.column_stack([np.zeros(51), np.zeros(51), np.linspace(0, 0.5, 51)])  # 1 cm
+    sprig = np.repeat(np.arange(1, 6) * 0.08, 2)  # 5 leaves of 2 points 8 cm apart
+    sprig = np.column_stack([sprig, np.tile([0.0, 0.01], 5), np.full(10, 0.5)])
+    speck = np.array([[2.0, 0.0, 0.5], [2.01, 0.0, 0.5]])  # a leaf far from any plant
+    lone = np.array([[0.06, 0.06, 0.25]])  # a lone plant label 8 cm from the stem: a flying pixel
+    chair = np.column_stack([np.full(51, -0.5), np.zeros(51), np.linspace(0, 0.5, 51)])
+    chair_stray = np.array([[-0.45, 0.0, 0.25], [-0.45, 0.01, 0.25]])  # chair speckle: stays
+    points = np.concatenate([stem, sprig, speck, lone, chair, chair_stray]).astype(np.float32)
+    network = np.array([Label.PLANT] * 64 + [Label.CHAIR] * 53, np.uint8)
+    labels = np.zeros(len(points), np.uint8)
+    clusters = np.zeros(len(points), np.int32)
+    labels[:51], clusters[:51] = Label.PLANT, 1
+    labels[64:115], clusters[64:115] = Label.CHAIR, 2
+    strays = np.concatenate([np.arange(51, 64), [115, 116]])
+    r1 = {int(Label.PLANT): 0.1, int(Label.CHAIR): 0.1}
+    joined = rejoin_strays(points, strays, network, labels, clusters, r1)
+    assert joined.tolist() == list(range(51, 61))  # the sprig, one wave per leaf
+    assert (labels[51:61] == Label.PLANT).all() and (clusters[51:61] == 1).all()
+    assert (labels[61:64] == 0).all()  # far from any plant; alone
+    assert (labels[115:] == 0).all()  # only plants' strays
+
+
+def test_sparse_foliage_that_sor_removes_comes_back_as_plant() -> None:
+    rng = np.random.default_rng(0)
+    pot, leaves = _plant(rng)
+    floor = np.column_stack(
+        [rng.uniform(-1.5, 1.5, 20_000), rng.uniform(-1.5, 1.5, 20_000), np.zeros(20_000)]
+    )
+    points = np.concatenate([floor, pot, leaves]).astype(np.float32)
+    labels = np.zeros(len(points), np.uint8)
+    labels[len(floor) :] = Label.PLANT
+    cloud = LabelledCloud(points, np.zeros((len(points), 3), np.uint8), labels)
+    leaf = np.arange(len(floor) + len(pot), len(points))
+    cfg = RefineConfig()
+    without = refine(cloud, dataclasses.replace(cfg, rejoin_strays=False), up=np.array([0, 0, 1.0]))
+    out = refine(cloud, cfg, up=np.array([0, 0, 1.0]))
+    lost = without.labels_iii[leaf] != Label.PLANT
+    assert lost.mean() > 0.5  # SOR and DBSCAN take the leaves for noise (86 %) ...
+    assert (out.labels_iii[leaf] == Label.PLANT).mean() > 0.75  # ... and most come back (81 %)
+    assert out.kept[leaf].mean() > 0.75  # SOR's among them stay in the refined map
+    points_section = refinement_metrics(out, gt_cloud=None)["points"]
+    assert points_section["strays_rejoined"] == len(out.strays) >= 0.5 * len(leaf)
