@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from benchmarks import refine_suite
-from benchmarks.refine_suite import Case, cases, load
+from benchmarks.refine_suite import Case, cases, held_out, load
 from capture.recording import Label
 from process.cloud import LabelledCloud
 from process.refine import RefineConfig
@@ -65,3 +66,17 @@ def test_set_takes_the_fields_type_and_refuses_an_unknown_field() -> None:
 def test_set_out_of_range_is_a_one_line_error() -> None:
     with pytest.raises(SystemExit, match=r"--set: refinement.seam_vote_m must be in 0.0..1.0"):
         refine_suite.main(["--set", "seam_vote_m=-1", "--only", "no such cloud"])
+
+
+def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
+    held = held_out()
+    assert len(held) == len(set(held)) == 124
+    seeds = {(name.split()[0], int(name.split()[-1])) for name in held}  # (generator, seed)
+    tuned = set()
+    for name, make in cases().items():
+        if name.split()[0] in ("g2", "g3", "g4"):
+            assert isinstance(make, partial)
+            tuned.add((name.split()[0], make.args[0]))
+    assert len(tuned) == 14 + 8 + 12 and not seeds & tuned
+    assert {refine_suite._group(n) for n in held} == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k"}
+    assert refine_suite._group("g4 office 60k") == "g4"  # the suite's g4 line stays one
