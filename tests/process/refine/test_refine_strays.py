@@ -68,3 +68,14 @@ def test_sparse_foliage_that_sor_removes_comes_back_as_plant() -> None:
     assert out.kept[leaf].mean() > 0.75  # SOR's among them stay in the refined map
     points_section = refinement_metrics(out, gt_cloud=None)["points"]
     assert points_section["strays_rejoined"] == len(out.strays) >= 0.5 * len(leaf)
+
+
+def test_strays_with_no_plant_to_join_or_no_plant_eps_join_nothing() -> None:
+    points = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [5.0, 5.0, 5.0]], np.float32)
+    network = np.full(3, Label.PLANT, np.uint8)
+    labels, clusters = np.zeros(3, np.uint8), np.zeros(3, np.int32)
+    strays = np.arange(3)
+    assert len(rejoin_strays(points, strays, network, labels, clusters, {7: 0.1})) == 0  # no host
+    labels[2], clusters[2] = Label.PLANT, 1
+    assert len(rejoin_strays(points, strays[:2], network, labels, clusters, {})) == 0  # no eps
+    assert (labels[:2] == 0).all()
