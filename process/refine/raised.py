@@ -97,6 +97,7 @@ def raised_off_tables(
         under = under[out_labels[under] == Label.TV_MONITOR]
         if len(under):
             desk = out_clusters[surface][out_labels[surface] == Label.TABLE]
+            desk = desk[desk > 0]  # into the desk's largest object on this top
             out_labels[under] = Label.TABLE
             out_clusters[under] = np.bincount(desk).argmax() if len(desk) else 0
             changed.append(under)
