@@ -97,7 +97,7 @@ def raised_off_tables(
         under = under[out_labels[under] == Label.TV_MONITOR]
         if len(under):
             desk = out_clusters[surface][out_labels[surface] == Label.TABLE]
-            desk = desk[desk > 0]  # into the desk's largest object on this top
+            desk = desk[desk > 0]  # into the cluster holding most of this top
             out_labels[under] = Label.TABLE
             out_clusters[under] = np.bincount(desk).argmax() if len(desk) else 0
             changed.append(under)
@@ -148,10 +148,10 @@ def _above(
         local = own[probe] - np.median(own[near], axis=1)
         sigma = float(median_abs_deviation(local, scale="normal"))
         top = float(np.percentile(own, 75))
-        band = top + max(BAND_SIGMAS * sigma, MIN_BAND_M)
+        width = max(BAND_SIGMAS * sigma, MIN_BAND_M)
+        band, below = top + width, top - width  # the band's upper and lower edges
         uv_own = uv_surface[in_piece]
         low, high = uv_own.min(axis=0) - CELL_M, uv_own.max(axis=0) + CELL_M
-        below = 2 * top - band  # the band's lower edge
         pick = ((h > band) & (h <= top + REACH_M)) | ((h < below) & (h >= top - SLAB_M))
         pick[pick] &= np.all((uv_near[pick] >= low) & (uv_near[pick] <= high), axis=1)
         rows, uv_rows = near_top[pick], uv_near[pick]
