@@ -187,7 +187,8 @@ def refine(
         prior = network[objects] if cfg.regrow_own_class_first else None
         # a point the network calls ceiling, floor or wall is evidence against every object,
         # and so is standing behind a wall plane (walls.behind_walls)
-        behind = behind_walls(cloud.points, planes.planes, cfg)[objects]
+        behind_any = behind_walls(cloud.points, planes.planes, cfg)  # SOR's outliers too
+        behind = behind_any[objects]
         keep_out = (
             behind
             if cfg.regrow_structure
@@ -238,10 +239,13 @@ def refine(
             left = np.zeros(len(cloud), bool)
             left[objects[~keep_out]] = True  # not behind a wall, not on a bare face
             left &= labels_iii == 0
-            strays = np.union1d(outliers, np.flatnonzero(left))
+            strays = np.union1d(outliers[~behind_any[outliers]], np.flatnonzero(left))
+            plant = per_class.get(int(Label.PLANT))
+            crown_min = plant.choice.min_size if plant and plant.choice else cfg.min_cluster_points
             strays_rejoined = rejoin_strays(
-                cloud.points, strays, network, labels_iii, clusters_iii, r1
-            )
+                cloud.points, strays, network, labels_iii, clusters_iii, r1, up=planes.up,
+                crown_min=crown_min,
+            )  # fmt: skip
             regrown = np.union1d(regrown, strays_rejoined)  # shown with the regrown points
     lap("regrowth")
     raised, sunk = np.zeros(0, np.intp), 0

@@ -70,13 +70,21 @@ def test_set_out_of_range_is_a_one_line_error() -> None:
 
 def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
     held = held_out()
-    assert len(held) == len(set(held)) == 124
-    seeds = {(name.split()[0], int(name.split()[-1])) for name in held}  # (generator, seed)
+    assert len(held) == len(set(held)) == 132
+
+    def seed(
+        name: str,
+    ) -> tuple[str, int]:  # (generator, seed): "g4 60k office 200", "rec seed 20 300f"
+        words = name.split()
+        return words[0], int(words[2] if words[0] == "rec" else words[-1])
+
+    seeds = {seed(name) for name in held}
     tuned = set()
     for name, make in cases().items():
-        if name.split()[0] in ("g2", "g3", "g4"):
+        if name.split()[0] in ("g2", "g3", "g4", "rec"):
             assert isinstance(make, partial)
             tuned.add((name.split()[0], make.args[0]))
-    assert len(tuned) == 14 + 8 + 12 and not seeds & tuned
-    assert {refine_suite._group(n) for n in held} == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k"}
+    assert len(tuned) == 14 + 8 + 12 + 5 and not seeds & tuned
+    groups = {refine_suite._group(n) for n in held}
+    assert groups == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k", "rec"}
     assert refine_suite._group("g4 office 60k") == "g4"  # the suite's g4 line stays one

@@ -79,3 +79,43 @@ def test_strays_with_no_plant_to_join_or_no_plant_eps_join_nothing() -> None:
     labels[2], clusters[2] = Label.PLANT, 1
     assert len(rejoin_strays(points, strays[:2], network, labels, clusters, {})) == 0  # no eps
     assert (labels[:2] == 0).all()
+
+
+def test_a_crown_beyond_r1_joins_the_pot_under_it_with_its_stem_and_flank_strays_stay() -> None:
+    """A pot whose stem the network missed; its crown 0.3 m higher, leaves of 2 points 5 cm
+    apart: beyond r1 of the pot, within r1 of each other; the unlabelled stem between. Under a
+    second plant's branch, over its plan box but below its top, strays beyond r1 of it (flying
+    pixels at its silhouette); a crown over nothing; three plant labels high over the pot, in
+    groups of 2 and 1."""
+    rng = np.random.default_rng(1)
+    pot = np.column_stack([rng.uniform(-0.08, 0.08, (300, 2)), rng.uniform(0, 0.25, 300)])
+    grid = np.stack(np.meshgrid(*[np.arange(-0.15, 0.16, 0.05)] * 2), -1).reshape(-1, 2)
+    crown = np.column_stack([grid, rng.uniform(0.55, 0.6, len(grid))])
+    crown = np.repeat(crown, 2, axis=0) + [0.0, 0.008, 0.0] * np.tile([[0], [1]], (len(grid), 1))
+    stem = np.column_stack([np.zeros(30), np.zeros(30), np.linspace(0.26, 0.55, 30)])
+    plant = np.column_stack([rng.uniform(1.9, 2.1, (400, 2)), rng.uniform(0, 0.25, 400)])
+    branch = np.column_stack(
+        [rng.uniform(1.9, 2.3, 200), rng.uniform(1.9, 2.1, 200), rng.uniform(0.7, 0.8, 200)]
+    )
+    plant = np.concatenate([plant, branch])  # a pot and a branch out to x = 2.3 at 0.7-0.8 m
+    flank = np.column_stack([np.full(20, 2.25), np.linspace(1.9, 2.1, 20), np.full(20, 0.4)])
+    flank = np.repeat(flank, 2, axis=0) + [0.0, 0.0, 0.008] * np.tile([[0], [1]], (20, 1))
+    lost = np.column_stack([np.full(10, 5.0), np.linspace(0, 0.2, 10), np.full(10, 0.8)])
+    lost = np.repeat(lost, 2, axis=0) + [0.008, 0.0, 0.0] * np.tile([[0], [1]], (10, 1))
+    specks = np.array([[0.0, 0.05, 1.2], [0.01, 0.05, 1.2], [0.05, -0.05, 1.4]])  # < crown_min
+    parts = [pot, crown, stem, plant, flank, lost, specks]
+    points = np.concatenate(parts).astype(np.float32)
+    start = np.cumsum([0] + [len(p) for p in parts])
+    network = np.full(len(points), Label.PLANT, np.uint8)
+    network[start[2] : start[3]] = 0  # the stem: missed
+    labels, clusters = np.zeros(len(points), np.uint8), np.zeros(len(points), np.int32)
+    labels[: start[1]], clusters[: start[1]] = Label.PLANT, 1
+    labels[start[3] : start[4]], clusters[start[3] : start[4]] = Label.PLANT, 2
+    strays = np.concatenate([np.arange(start[1], start[3]), np.arange(start[4], start[7])])
+    r1, up = {int(Label.PLANT): 0.1}, np.array([0.0, 0.0, 1.0])
+    unaided = rejoin_strays(points, strays, network, labels.copy(), clusters.copy(), r1)
+    assert len(unaided) == 0  # without up: more than r1 from any plant point, as before
+    joined = rejoin_strays(points, strays, network, labels, clusters, r1, up=up, crown_min=5)
+    assert joined.tolist() == list(range(start[1], start[3]))  # the crown and the stem only
+    assert (clusters[start[1] : start[3]] == 1).all()  # into its pot's cluster
+    assert (labels[start[4] :] == 0).all()  # the flank's strays, the far crown, the specks
