@@ -57,6 +57,8 @@ class RefineConfig:
     # regrowth; 0: off
     face_fill_share: float = 0.6  # ... upright ones where one class holds this share of their
     # object labels give it to their points left 0 after regrowth; 0: off
+    bare_face_rim_share: float = 0.5  # a bare face whose rim regrowth gave this share of to one
+    # object class is that object's: a sofa's seat the network missed whole (faces.py); 0: off
     table_surfaces: bool = True  # a level plane at a desk's height is a table top (surfaces.py):
     table_heights_m: tuple[float, float] = (0.5, 1.1)  # ... its median this high above the floor
     table_min_area_m2: float = 0.25  # ... and this large; its structure, clutter and unlabelled
@@ -153,6 +155,7 @@ class RefineConfig:
             "wall_keep_out_m": 0.0,
             "bare_face_share": 0.0,
             "face_fill_share": 0.0,
+            "bare_face_rim_share": 0.0,
             "floor_leaf": False,
             "furniture_depth_m": 0.0,
             "plane_local_hypotheses": 0,
@@ -212,6 +215,7 @@ class RefineConfig:
             "wall_object_share": (self.wall_object_share, 0.0, 1.0),
             "bare_face_share": (self.bare_face_share, 0.0, 1.0),
             "face_fill_share": (self.face_fill_share, 0.0, 1.0),
+            "bare_face_rim_share": (self.bare_face_rim_share, 0.0, 1.0),
             "face_min_area_m2": (self.face_min_area_m2, 0.0, 100.0),
             "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),

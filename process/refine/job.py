@@ -131,6 +131,7 @@ def refinement_metrics(
         "behind_walls_left_out": result.behind_walls,
         "bare_faces_left_out": result.bare_faces,
         "faces_filled": len(result.faces_filled),
+        "bare_faces_enclosed": len(result.enclosed),  # of faces_filled
         "seam_relabelled": len(result.seams),
         "piece_relabelled": len(result.pieces),
         "raised_relabelled": len(result.raised),

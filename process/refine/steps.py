@@ -19,7 +19,7 @@ from process.evaluate import label_metrics
 from process.refine.cells import attached_clusters, capped_cells, sparse_inside_others
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
-from process.refine.faces import bare_faces, fill_faces
+from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.orphans import adopt_orphans
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
@@ -87,6 +87,9 @@ class RefineResult:
     strays: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of plant-labelled points SOR or phase II left out that rejoined a plant
     # after regrowth (outliers.py; SOR's among them survive)
+    enclosed: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices on bare faces enclosed by one object that took its class (faces.py; they
+    # are among faces_filled too)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -177,7 +180,7 @@ def refine(
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
-    filled = orphans = strays_rejoined = np.zeros(0, np.intp)
+    filled = orphans = strays_rejoined = enclosed = np.zeros(0, np.intp)
     tabletop = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -229,6 +232,10 @@ def refine(
         filled = fill_faces(
             cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
         )
+        enclosed = enclosed_faces(
+            cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
+        )
+        filled = np.union1d(filled, enclosed)
         regrown = np.union1d(regrown, filled)  # shown with the regrown points in the .rrd
         if cfg.orphan_adoption:  # what the network saw and phase II left unlabelled
             labels_iii, clusters_iii, orphans = adopt_orphans(
@@ -278,7 +285,7 @@ def refine(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
         rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
-        strays_rejoined,
+        strays_rejoined, enclosed,
     )  # fmt: skip
 
 
