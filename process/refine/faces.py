@@ -93,17 +93,19 @@ def enclosed_faces(
     filled: list[npt.NDArray[np.intp]] = []
     if cfg.bare_face_share <= 0 or cfg.bare_face_rim_share <= 0:
         return np.zeros(0, np.intp)
-    tree: cKDTree | None = None
     for face in _faces(points, planes, cfg, level_too=True, past_max=True):
         if np.count_nonzero(network[face] >= Label.TABLE) >= cfg.bare_face_share * len(face):
             continue  # not bare
         empty = face[(labels[face] == 0) if open_ is None else (labels[face] == 0) & open_[face]]
         if len(empty) == 0:
             continue
-        tree = cKDTree(points) if tree is None else tree
-        probe = face[:: max(1, len(face) // RIM_PROBES)]  # the rim of a sample is the rim
-        near = np.unique(np.concatenate(tree.query_ball_point(points[probe], RIM_M)))
-        rim = np.setdiff1d(near, face, assume_unique=True)
+        probe = points[face[:: max(1, len(face) // RIM_PROBES)]]  # a sample's rim is the rim
+        box = np.all(
+            (points >= probe.min(axis=0) - RIM_M) & (points <= probe.max(axis=0) + RIM_M), axis=1
+        )
+        box[face] = False
+        near = np.flatnonzero(box)
+        rim = near[np.isfinite(cKDTree(probe).query(points[near], distance_upper_bound=RIM_M)[0])]
         counts = np.bincount(labels[rim], minlength=Label.TABLE + 1)
         top = int(np.argmax(counts[Label.TABLE :])) + Label.TABLE
         if len(rim) == 0 or counts[top] < cfg.bare_face_rim_share * len(rim):
