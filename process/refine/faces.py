@@ -61,21 +61,20 @@ def bare_faces(
     planes: PlaneSegmentation,
     labels: npt.NDArray[np.uint8],
     cfg: RefineConfig,
-) -> npt.NDArray[np.bool_]:
-    """Return the points of the faces the network leaves bare (`labels`: its labels)."""
-    out = np.zeros(len(points), bool)
+) -> list[npt.NDArray[np.intp]]:
+    """Return the inliers of each face the network leaves bare (`labels`: its labels)."""
     if cfg.bare_face_share <= 0:
-        return out
-    for face in _faces(points, planes, cfg, level_too=True, past_max=True):
-        if np.count_nonzero(labels[face] >= Label.TABLE) < cfg.bare_face_share * len(face):
-            out[face] = True
-    return out
+        return []
+    return [
+        face
+        for face in _faces(points, planes, cfg, level_too=True, past_max=True)
+        if np.count_nonzero(labels[face] >= Label.TABLE) < cfg.bare_face_share * len(face)
+    ]
 
 
 def enclosed_faces(
     points: npt.NDArray[np.float32],
-    planes: PlaneSegmentation,
-    network: npt.NDArray[np.uint8],
+    bare: list[npt.NDArray[np.intp]],
     labels: npt.NDArray[np.uint8],
     clusters: npt.NDArray[np.int32],
     cfg: RefineConfig,
@@ -84,18 +83,15 @@ def enclosed_faces(
 ) -> npt.NDArray[np.intp]:
     """Give a bare face the class that holds most of its rim after regrowth (in place).
 
-    `network`: the network's labels, which say which faces are bare (as `bare_faces`);
-    `labels` and `clusters`: the refined ones, updated in place: the face's points still 0
-    (and in `open_`, if given) take the class that holds `bare_face_rim_share` of the rim's
-    points, and the cluster that holds most of the rim's points of that class. Returns the
-    indices of the points filled.
+    `bare`: the bare faces' inliers (`bare_faces`); `labels` and `clusters`: the refined ones,
+    updated in place: the face's points still 0 (and in `open_`, if given) take the class that
+    holds `bare_face_rim_share` of the rim's points, and the cluster that holds most of the
+    rim's points of that class. Returns the indices of the points filled.
     """
     filled: list[npt.NDArray[np.intp]] = []
-    if cfg.bare_face_share <= 0 or cfg.bare_face_rim_share <= 0:
+    if cfg.bare_face_rim_share <= 0:
         return np.zeros(0, np.intp)
-    for face in _faces(points, planes, cfg, level_too=True, past_max=True):
-        if np.count_nonzero(network[face] >= Label.TABLE) >= cfg.bare_face_share * len(face):
-            continue  # not bare
+    for face in bare:
         empty = face[(labels[face] == 0) if open_ is None else (labels[face] == 0) & open_[face]]
         if len(empty) == 0:
             continue

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
+from process.refine.graph import components
 from process.refine.regrowth import frame
 
 LINK = 2.0  # a stray with another plant-labelled point this many point spacings away is a leaf
@@ -150,8 +149,7 @@ def _crowns(
     plant = int(Label.PLANT)
     xyz = points[waiting].astype(np.float64) @ rotate.T
     pairs = cKDTree(xyz).query_pairs(r1_m, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (len(xyz), len(xyz)))
-    _, group = connected_components(graph, directed=False)
+    _, group = components(len(xyz), pairs[:, 0], pairs[:, 1])
     refined = np.flatnonzero((labels == plant) & (clusters > 0))
     ids, row = np.unique(clusters[refined], return_inverse=True)
     if len(ids) == 0:

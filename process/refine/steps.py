@@ -199,7 +199,11 @@ def refine(
         )
         # ... and lying on a large upright face the network leaves bare: furniture it has no
         # class for (a cabinet's front under a plant on it; faces.py)
-        faces = bare_faces(cloud.points, planes, network, cfg)[objects]
+        bare = bare_faces(cloud.points, planes, network, cfg)
+        on_bare = np.zeros(len(cloud), bool)
+        for face in bare:
+            on_bare[face] = True
+        faces = on_bare[objects]
         keep_out |= faces
         leaf = None
         if cfg.floor_leaf:  # unlabelled floor-plane points join objects but relay no growth
@@ -232,9 +236,7 @@ def refine(
         filled = fill_faces(
             cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
         )
-        enclosed = enclosed_faces(
-            cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
-        )
+        enclosed = enclosed_faces(cloud.points, bare, labels_iii, clusters_iii, cfg, open_=open_)
         filled = np.union1d(filled, enclosed)
         regrown = np.union1d(regrown, filled)  # shown with the regrown points in the .rrd
         if cfg.orphan_adoption:  # what the network saw and phase II left unlabelled

@@ -88,3 +88,9 @@ def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
     groups = {refine_suite._group(n) for n in held}
     assert groups == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k", "rec"}
     assert refine_suite._group("g4 office 60k") == "g4"  # the suite's g4 line stays one
+
+
+def test_a_groups_line_counts_the_clouds_at_095_and_those_gaining_005() -> None:
+    pairs = [(0.80, 0.96), (0.93, 0.96), (0.90, 0.94), (0.88, 0.955)]  # (phase I, phase III)
+    line = refine_suite._summary("rec", pairs)
+    assert line == "rec: mean III 0.954, 3 of 4 >= 0.95, 2 >= I + 0.05"  # not 0.90 -> 0.94
