@@ -106,6 +106,9 @@ class RefineConfig:
     # longer diagonal is an object of its own (a chair under a seated person); 0: any size
     table_top_m: float = 0.02  # regrowth: a table's box reaches this far above its top,
     # not r1: clutter on it that DBSCAN set to 0 stays off the table (0: r1, the paper's)
+    regrow_surface_link: float = 2.5  # regrowth's waves first reach this many point spacings,
+    # along surfaces, until none joins, then r1 (a seated person's r1 bridges the gap to his
+    # chair's back; regrowth.py); 0: r1 only, the paper's
     rejoin_own_class: bool = True  # after regrowth, a point still 0 inside an object of its
     # phase-I class (not a table), and of no other class, joins it beyond r1 (regrowth.py)
     tabletop_objects: bool = True  # after regrowth, points still 0 of one object class that
@@ -165,6 +168,7 @@ class RefineConfig:
             "table_surfaces": False,
             "table_top_m": 0.0,
             "rejoin_own_class": False,
+            "regrow_surface_link": 0.0,
             "tabletop_objects": False,
             "seam_vote_m": 0.0,
             "piece_vote": False,
@@ -201,6 +205,7 @@ class RefineConfig:
             "nested_adopt_ratio": (self.nested_adopt_ratio, 0.0, 10**6),
             "nested_patch_max_m": (self.nested_patch_max_m, 0.0, 10**3),
             "table_top_m": (self.table_top_m, 0.0, 1.0),
+            "regrow_surface_link": (self.regrow_surface_link, 0.0, 100.0),
             "seam_vote_m": (self.seam_vote_m, 0.0, 1.0),
             "seam_angle_deg": (self.seam_angle_deg, 0.0, 90.0),
             "seam_flatness": (self.seam_flatness, 0.0, 1.0 / 3.0),

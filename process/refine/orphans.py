@@ -26,14 +26,13 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import components, knn_edges
+from process.refine.graph import components, knn_edges, point_spacing
 
 NEIGHBOURS = 8  # graph edges per unlabelled point
 LINK = 2.5  # unlabelled points within this many point spacings are one segment
 SAID = 0.5  # share of a segment's points the network labelled (any class)
 MIN_CONTACT = 10  # points of a segment within LINK spacings of an object point
 SHARE = 0.95  # of a segment's contacts touch objects of the class it takes
-_SPACING_SAMPLE = 20_000  # object points whose nearest neighbour gives the spacing
 
 
 def adopt_orphans(
@@ -59,9 +58,7 @@ def adopt_orphans(
     if len(rows) < MIN_CONTACT or len(held) < 2:
         return labels, clusters, np.zeros(0, np.intp)
     objects = cKDTree(np.asarray(points[held], np.float64))
-    sample = np.asarray(points[held[:: max(1, len(held) // _SPACING_SAMPLE)]], np.float64)
-    spacing = float(np.median(objects.query(sample, 2)[0][:, 1]))
-    link = LINK * spacing
+    link = LINK * point_spacing(points[held], objects)
     xyz = np.asarray(points[rows], np.float64)
     segment = _segments(xyz, link)
     dist, nearest = objects.query(xyz, distance_upper_bound=link, workers=-1)

@@ -10,6 +10,13 @@ neighbours beside a long table. Growth runs in waves, each wave testing the rema
 unlabelled points against the points that joined in the previous one, until no point joins.
 A point that two clusters reach in the same wave goes to the nearer one: the cluster of its
 nearest qualifying frontier point.
+
+Growth first follows surfaces (`surface_link`): waves of a few point spacings, until none
+joins, before waves of r1. At r1 (9-11 cm at 60k object points) a seated person reaches across
+the 3-7 cm between his back and his chair's, and his waves, nearer, take the unlabelled points
+of the chair's back before the chair's own labelled points further along it do; along the
+surface the chair's points reach them first (generator 4 at 60k, 60 fresh rooms: +0.0020 F1
+on average, 39 -> 42 of them >= 0.95; most of the rest changes a few points either way).
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
+from process.refine.graph import point_spacing
 from process.refine.objects import group_objects
 
 _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, nearest first
@@ -65,6 +73,7 @@ def regrow(
     patch_max_m: float = 0.0,
     table_top_m: float = 0.0,
     rejoin: bool = False,
+    surface_link: float = 0.0,
 ) -> Regrowth:
     """Grow every cluster (clusters > 0) over the points with label 0.
 
@@ -114,6 +123,8 @@ def regrow(
             (not a table) whose box holds it, and no object of another class's box, joins
             that object however far from it (chair legs whose upper half the network
             missed, more than r1 below the seat); a table's box shelters chairs under it.
+        surface_link: in each pass, waves reach at most this many point spacings (the median
+            nearest-neighbour distance of `points`) until none joins, then r1; 0: r1 only.
     """
     labels, clusters = labels.copy(), clusters.copy()
     if up is not None:
@@ -147,18 +158,25 @@ def regrow(
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
     grown: list[npt.NDArray[np.intp]] = []
     waves = 0
+    steps = [np.inf]  # each pass's waves reach r1 ...
+    if surface_link > 0:  # ... after waves along surfaces
+        steps.insert(0, surface_link * point_spacing(points))
     for own in (None,) if prior is None else (prior, None):  # its own class first, then any
-        frontier = np.flatnonzero((clusters > 0) if leaf is None else (clusters > 0) & ~leaf)
-        open_ = np.flatnonzero((labels == 0) if keep_out is None else (labels == 0) & ~keep_out)
-        while len(frontier) and len(open_):
-            joined, row = _wave(points, frontier, lookup[frontier], open_, table, own, nested)
-            if len(joined) == 0:
-                break
-            labels[joined], clusters[joined] = table.label[row], ids[row].astype(np.int32)
-            lookup[joined] = row
-            grown.append(joined)
-            open_ = np.setdiff1d(open_, joined, assume_unique=True)
-            frontier, waves = (joined if leaf is None else joined[~leaf[joined]]), waves + 1
+        for step in steps:
+            frontier = np.flatnonzero((clusters > 0) if leaf is None else (clusters > 0) & ~leaf)
+            open_ = (labels == 0) if keep_out is None else (labels == 0) & ~keep_out
+            open_ = np.flatnonzero(open_)
+            while len(frontier) and len(open_):
+                joined, row = _wave(
+                    points, frontier, lookup[frontier], open_, table, own, nested, step
+                )
+                if len(joined) == 0:
+                    break
+                labels[joined], clusters[joined] = table.label[row], ids[row].astype(np.int32)
+                lookup[joined] = row
+                grown.append(joined)
+                open_ = np.setdiff1d(open_, joined, assume_unique=True)
+                frontier, waves = (joined if leaf is None else joined[~leaf[joined]]), waves + 1
     rejoined = 0
     if rejoin and prior is not None:  # what growth left: points inside their class's object
         open_ = (labels == 0) if keep_out is None else (labels == 0) & ~keep_out
@@ -363,14 +381,16 @@ def _wave(
     table: _Clusters,
     prior: npt.NDArray[np.uint8] | None = None,
     nested: npt.NDArray[np.bool_] | None = None,
+    step: float = np.inf,
 ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     """Return the open points that join in this wave and the cluster row each joins.
 
-    With `prior`, a point with a prior label joins only a cluster of that class. A `nested`
-    cluster takes only points whose prior is its class.
+    A point joins a cluster with a frontier point within the smaller of its r1 and `step`. With
+    `prior`, a point with a prior label joins only a cluster of that class. A `nested` cluster
+    takes only points whose prior is its class.
     """
     k = min(_CANDIDATES, len(frontier))
-    reach = float(table.r1.max())
+    reach = min(float(table.r1.max()), step)
     distance, nearest = cKDTree(points[frontier]).query(
         points[open_], k=k, distance_upper_bound=reach, workers=-1
     )
@@ -381,7 +401,7 @@ def _wave(
     rows = np.where(hit, frontier_row[np.minimum(nearest, len(frontier) - 1)], 0)
     xyz = points[open_[near]].astype(np.float64)[:, None, :]
     inside = np.all((xyz >= table.low[rows]) & (xyz <= table.high[rows]), axis=2)
-    ok = hit & (distance <= table.r1[rows]) & inside
+    ok = hit & (distance <= np.minimum(table.r1[rows], step)) & inside
     if prior is not None:
         own = prior[open_[near]][:, None]
         ok &= (own == 0) | (own == table.label[rows])

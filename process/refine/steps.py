@@ -219,6 +219,7 @@ def refine(
             up=planes.up, prior=prior, keep_out=keep_out, leaf=leaf, nest=cfg.nested_objects_yield,
             adopt_ratio=cfg.nested_adopt_ratio, patch_max_m=cfg.nested_patch_max_m,
             table_top_m=cfg.table_top_m, rejoin=cfg.rejoin_own_class,
+            surface_link=cfg.regrow_surface_link,
         )  # fmt: skip
         new_labels, new_clusters = grown.labels, grown.clusters
         if cfg.tabletop_objects and planes.up is not None:

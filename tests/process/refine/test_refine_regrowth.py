@@ -528,3 +528,23 @@ def test_a_chair_seat_just_under_a_seated_person_is_not_lying_on_them(
     monkeypatch.setattr("process.refine.regrowth.TOUCH_SHARE", 0.0)
     near = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
     assert (near.labels[len(person) :] == 6).all()  # within 2 r1 only: it was taken
+
+
+def test_growth_follows_the_chairs_back_before_the_person_reaches_across_the_gap() -> None:
+    """A chair's back whose middle the network missed (30 cm across) and a seated person's back 8
+    cm before it, both labelled, r1 10 cm (as at 60k object points). At r1 the person is nearer
+    to the middle of the hole than the chair's labelled rim is, and takes it; in waves of 2.5 point
+    spacings (5 cm) along the back, the chair refills its hole and the person reaches none of it."""
+    back = grid_patch((0.0, 0.5), (0.45, 0.95))[:, [0, 2, 1]] + (0.0, 0.5, 0.0)
+    hole = np.linalg.norm(back[:, [0, 2]] - (0.25, 0.7), axis=1) < 0.15
+    person = grid_patch((0.05, 0.45), (0.5, 1.4))[:, [0, 2, 1]] + (0.0, 0.42, 0.0)
+    points = np.concatenate([back, person]).astype(np.float32)
+    labels = np.r_[np.where(hole, 0, 5), np.full(len(person), 6)].astype(np.uint8)
+    clusters = np.r_[np.where(hole, 0, 1), np.full(len(person), 2)].astype(np.int32)
+    kw = {"r1_m": {5: 0.1, 6: 0.1}}
+    at_r1 = regrow(points, labels, clusters, **kw)  # type: ignore[arg-type]
+    along = regrow(points, labels, clusters, surface_link=2.5, **kw)  # type: ignore[arg-type]
+    assert hole.sum() > 150
+    assert (at_r1.labels[: len(back)][hole] == 6).mean() > 0.2  # across the gap: the person's
+    assert (along.labels[: len(back)] == 5).all()  # along the back: the chair's, all of it
+    assert (along.labels[len(back) :] == 6).all()
