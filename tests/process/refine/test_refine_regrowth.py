@@ -381,7 +381,8 @@ def test_a_chair_under_a_seated_person_is_an_object_not_a_patch(
     above the seat, the back 8 cm before the chair's, and the legs, torso and arms around. The chair
     lies in the person's box, near the person and outweighed, but its box is no patch's, and it
     does not lie on the person (none of it within r1 / 2): it keeps its class, and as an object
-    (`patch_max_m`) refills its hole."""
+    (`patch_max_m`) refills its hole. Were it to lie on him, a chair in a person's box is still
+    never his patch (`SEATED`); only without both rules does he adopt it."""
     seat = grid_patch((0.0, 0.5), (0.0, 0.5), z=0.45)
     back = grid_patch((0.0, 0.5), (0.45, 0.95))[:, [0, 2, 1]] + (0.0, 0.5, 0.0)
     chair = np.concatenate([seat, back])
@@ -401,6 +402,9 @@ def test_a_chair_under_a_seated_person_is_an_object_not_a_patch(
     apart = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
     assert (apart.labels[: len(chair)][~hole] == 5).all()  # not lying on the person: a chair
     monkeypatch.setattr("process.refine.regrowth.TOUCH_SHARE", 0.0)
+    seated = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
+    assert (seated.labels[: len(chair)][~hole] == 5).all()  # lying on him, but a seat (SEATED)
+    monkeypatch.setattr("process.refine.regrowth.SEATED", ())
     patch = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, **kw)  # type: ignore[arg-type]
     own = regrow(points, labels, clusters, nest=True, adopt_ratio=3.0, patch_max_m=0.7, **kw)  # type: ignore[arg-type]
     assert (patch.labels[: len(chair)] == 6).mean() > 0.9  # as a patch: the person's
@@ -509,7 +513,9 @@ def test_a_chair_seat_just_under_a_seated_person_is_not_lying_on_them(
     """The person's thighs 8 cm over a 40 cm seat: every seat point lies within 2 r1 (10 cm) of
     the person, none within r1 / 2, so the seat is no patch on the person (generator 3's room 2:
     1,519 chair points had taken the person's class). A patch in the
-    thighs' sheet lies on it and is adopted."""
+    thighs' sheet lies on it and is adopted. (The touch rule alone: a chair is never a person's
+    patch anyway, `SEATED`, which is off here.)"""
+    monkeypatch.setattr("process.refine.regrowth.SEATED", ())
     thighs = grid_patch((0.0, 1.0), (0.0, 1.0), z=0.55)
     back = grid_patch((0.0, 1.0), (0.55, 1.5))[:, [0, 2, 1]]  # upright at y = 0
     shins = grid_patch((0.0, 1.0), (0.0, 0.55))[:, [0, 2, 1]] + (0.0, 1.0, 0.0)  # at y = 1
