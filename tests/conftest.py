@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,12 @@ import pytest
 from capture.recording import Extrinsics, Intrinsics, RecordingWriter
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+# A test run started in the background (`make test &` from a script) inherits SIGINT ignored, and
+# so would every process the tests start: the Ctrl-C tests (batch, viewer) would send a signal
+# their child never sees. Give the run Python's own handler; children then start at the default.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # A D435-like pair of cameras at 640x480 (colour) and 640x480 (depth), 15 mm baseline along x.
 COLOR_K = Intrinsics(640, 480, 615.0, 615.0, 320.0, 240.0)
