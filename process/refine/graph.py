@@ -15,16 +15,19 @@ from scipy.spatial import cKDTree
 SPACING_SAMPLE = 20_000  # points whose nearest neighbour gives the point spacing
 
 
-def point_spacing(points: npt.NDArray[np.floating], tree: cKDTree | None = None) -> float:
+def point_spacing(
+    points: npt.NDArray[np.floating], tree: cKDTree | None = None, *, sample: int = SPACING_SAMPLE
+) -> float:
     """Return the median distance from an even sample of the points to their nearest other one.
 
-    `tree`, if given, is a k-d tree of these points (it is built otherwise).
+    `tree`, if given, is a k-d tree of these points (it is built otherwise); about `sample`
+    points, every k-th, are asked.
     """
     if len(points) < 2:
         return 0.0
     tree = cKDTree(np.asarray(points, np.float64)) if tree is None else tree
-    sample = np.asarray(points[:: max(1, len(points) // SPACING_SAMPLE)], np.float64)
-    return float(np.median(tree.query(sample, 2)[0][:, 1]))
+    probe = np.asarray(points[:: max(1, len(points) // sample)], np.float64)
+    return float(np.median(tree.query(probe, 2)[0][:, 1]))
 
 
 def knn_edges(

@@ -7,7 +7,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
-from process.refine.graph import components
+from process.refine.graph import components, point_spacing
 from process.refine.regrowth import frame
 
 LINK = 2.0  # a stray with another plant-labelled point this many point spacings away is a leaf
@@ -73,8 +73,7 @@ def rejoin_strays(
     if plant not in r1_m or len(waiting) == 0:
         return np.zeros(0, np.intp)
     tree = cKDTree(points[network == plant])
-    probe = np.linspace(0, tree.n - 1, min(tree.n, _PROBES)).astype(np.intp)
-    spacing = float(np.median(tree.query(tree.data[probe], 2)[0][:, 1]))
+    spacing = point_spacing(tree.data, tree, sample=_PROBES)
     company = tree.query(points[waiting], 2, distance_upper_bound=LINK * spacing)[0]
     waiting = waiting[np.isfinite(company[:, 1])]  # the stray itself is its first neighbour
     hosts = np.flatnonzero((labels == plant) & (clusters > 0))  # the first wave's frontier
