@@ -12,6 +12,11 @@ normal, among those within `_MAX_HINT_DEG` of the hint, under which the most pla
 a structural label that fits their plane's orientation (floor and ceiling on level planes, wall
 on upright ones), minus those that do not. Without such labels (clouds labelled with objects
 only), the hint snaps to the largest plane within `_SNAP_UP_DEG`, as before.
+
+Without a hint (`semreplay-process refine` on a map file) the same vote runs over all plane
+normals, and the up faces from the floor-labelled points to the ceiling-labelled ones (or to
+the rest of the room). Only clouds without structure labels fall back to the objects' position
+and the largest plane.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ _SNAP_UP_DEG = 40.0  # a given `up` is replaced by the normal of the largest pla
 _MAX_HINT_DEG = 65.0  # with network evidence: up lies within this of the hint
 _MIN_EVIDENCE = 0.05  # ... and at least this share of the planes' inliers carry structure labels
 _MIN_OBJECT_POINTS = 100  # without a hint, this many object-labelled points orient a table top
+_MIN_LEVEL_POINTS = 100  # ... and this many floor- or ceiling-labelled points a labelled vote
 _BOUNDARY_SHARE = 0.05  # a plane with at most this share of the points on a side bounds the room
 _AXIS_APART_DEG = 20.0  # plane normals this far apart are different axes of the room
 _LOPSIDED_RATIO = 2.0  # another axis is up when the objects are this many times as lopsided
@@ -45,10 +51,11 @@ def gravity(
 ) -> tuple[npt.NDArray[np.float64] | None, str]:
     """Return (gravity-up, how it was found) from the hint `up`, the planes and the labels.
 
-    Sources: "labelled planes" (the network's structure labels chose among plane normals near
-    the hint), "argument snapped to plane", "argument", "largest plane" (no hint), "largest
-    plane, objects below" (no hint, the plane has points on both sides), "plane with the
-    objects at one end" (no hint, the largest plane is a wall: `_lopsided_axis`) or "none".
+    Sources: "labelled planes" (the network's structure labels chose among plane normals, near
+    the hint where there is one), "argument snapped to plane", "argument", "largest plane" (no
+    hint), "largest plane, objects below" (no hint, the plane has points on both sides),
+    "plane with the objects at one end" (no hint, the largest plane is a wall:
+    `_lopsided_axis`) or "none".
     """
     if up is not None:
         up = np.asarray(up, np.float64) / np.linalg.norm(up)
@@ -66,6 +73,12 @@ def gravity(
     if not found:
         return None, "none"
     if labels is not None:
+        # a map fused from a hand-held camera holds a floor the network labels floor: that
+        # outvotes where the objects lie (generator recordings whose wall the objects line,
+        # with the floor the largest plane, turned the room on its side)
+        voted = _labelled_up(found, None, labels, level_tolerance_deg, points=points)
+        if voted is not None:
+            return voted, "labelled planes"
         lopsided = _lopsided_axis(points, found, labels)
         if lopsided is not None:
             return lopsided, "plane with the objects at one end"
@@ -134,13 +147,17 @@ def _inside_the_room(heights: npt.NDArray[np.float32]) -> bool:
 
 def _labelled_up(
     found: Found,
-    hint: npt.NDArray[np.float64],
+    hint: npt.NDArray[np.float64] | None,
     labels: npt.NDArray[np.uint8],
     tolerance_deg: float,
+    *,
+    points: npt.NDArray[np.float32] | None = None,
 ) -> npt.NDArray[np.float64] | None:
     """Return the plane normal near `hint` that the network's structure labels agree with most.
 
-    None when the planes carry too few structure labels to say, or no normal is near the hint.
+    Without a hint every normal competes and `points` orient the winner (`_facing`). None when
+    the planes carry too few structure labels to say, no normal is near the hint, or (without
+    one) no floor or ceiling label says which way is up.
     """
     if not found:
         return None
@@ -158,7 +175,7 @@ def _labelled_up(
     upright_cos = math.sin(math.radians(tolerance_deg))
     best: tuple[float, npt.NDArray[np.float64]] | None = None
     for normal in normals:
-        if abs(normal @ hint) < cos_near:
+        if hint is not None and abs(normal @ hint) < cos_near:
             continue
         cosine = np.abs(normals @ normal)
         level, upright = cosine >= level_cos, cosine <= upright_cos
@@ -169,5 +186,28 @@ def _labelled_up(
             - (level_votes * upright).sum()
         )
         if score > 0 and (best is None or score > best[0]):
-            best = (score, normal * np.sign(normal @ hint))
-    return None if best is None else best[1]
+            best = (score, normal if hint is None else normal * np.sign(normal @ hint))
+    if best is None or hint is not None:
+        return None if best is None else best[1]
+    assert points is not None, "without a hint the points say which way is up"
+    return _facing(points, best[1], labels)
+
+
+def _facing(
+    points: npt.NDArray[np.float32], normal: npt.NDArray[np.float64], labels: npt.NDArray[np.uint8]
+) -> npt.NDArray[np.float64] | None:
+    """Return `normal` turned from the floor-labelled points to the ceiling-labelled ones.
+
+    Median heights; with one of the two labels only, to or from the whole cloud's median. None
+    when fewer than `_MIN_LEVEL_POINTS` carry either label.
+    """
+    heights = points @ normal.astype(np.float32)
+    floor, ceiling = labels == Label.FLOOR, labels == Label.CEILING
+    enough = [int(m.sum()) >= _MIN_LEVEL_POINTS for m in (floor, ceiling)]
+    if not any(enough):
+        return None
+    low = float(np.median(heights[floor] if enough[0] else heights))
+    high = float(np.median(heights[ceiling] if enough[1] else heights))
+    if high == low:
+        return None
+    return normal * (1.0 if high > low else -1.0)

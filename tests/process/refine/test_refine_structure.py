@@ -55,6 +55,28 @@ def test_gravity_52_degrees_off_is_found_from_the_labelled_planes() -> None:
     assert blind.up is not None and abs(blind.up[2]) < 0.1  # ... which is the wall: wrong
 
 
+def test_without_a_hint_the_labelled_floor_outvotes_shelves_lining_one_wall() -> None:
+    """A room whose furniture stands along one wall (two tall shelves, 2.2 m): the objects lie
+    at one end of the room's depth and in the middle of its height. Where the network labels
+    structure, the floor-labelled largest plane is level; without those labels the objects'
+    lopsidedness turns the room on its side (generator recordings refined from a map file)."""
+    points, labels = _room()
+    shelf = grid_patch((0.5, 1.7), (0.0, 2.2), step=0.03)[:, [0, 2, 1]]  # upright, 1.2 m wide
+    shelves = np.concatenate([shelf + np.array([x, 0.3, 0.0], np.float32) for x in (0.0, 2.0)])
+    points = np.concatenate([points, shelves]).astype(np.float32)
+    labels = np.r_[labels, np.full(len(shelves), Label.CLUTTER)].astype(np.uint8)
+    seg = segment_planes(points, CFG, up=None, labels=labels)
+    assert seg.up_source == "labelled planes"
+    assert seg.up is not None and seg.up @ [0.0, 0.0, 1.0] == pytest.approx(1.0, abs=1e-3)
+    assert (seg.labels[:7500] == Label.FLOOR).mean() > 0.99
+    objects_only = np.where(labels >= Label.TABLE, labels, 0).astype(np.uint8)
+    blind = segment_planes(points, CFG, up=None, labels=objects_only)
+    assert blind.up_source == "plane with the objects at one end"
+    assert blind.up is not None and abs(blind.up[1]) > 0.99  # the wall's normal: on its side
+    flipped = segment_planes(points * np.float32(-1.0), CFG, up=None, labels=labels)
+    assert flipped.up is not None and flipped.up @ [0.0, 0.0, -1.0] == pytest.approx(1.0, abs=1e-3)
+
+
 def test_a_floor_seen_from_above_with_no_wall_is_floor_when_the_network_says_so() -> None:
     floor = grid_patch((0.0, 3.0), (0.0, 2.0), step=0.03)
     chair = grid_patch((1.0, 1.45), (1.0, 1.45), z=0.45, step=0.02)
