@@ -132,6 +132,9 @@ class RefineConfig:
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
+    inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
+    # neighbours are at least this share objects is opened to regrowth (inside.py; 0: never)
+    inside_objects_link: float = 3.0  # ... neighbours within this many object point spacings
     seed: int = 0  # RANSAC sampling
 
     @classmethod
@@ -177,6 +180,7 @@ class RefineConfig:
             "orphan_adoption": False,
             "object_bridge_m": 0.0,
             "regrow_structure": True,
+            "inside_objects_share": 0.0,
         }
         return cls(**{**paper, **overrides})
 
@@ -206,6 +210,8 @@ class RefineConfig:
             "nested_patch_max_m": (self.nested_patch_max_m, 0.0, 10**3),
             "table_top_m": (self.table_top_m, 0.0, 1.0),
             "regrow_surface_link": (self.regrow_surface_link, 0.0, 100.0),
+            "inside_objects_share": (self.inside_objects_share, 0.0, 1.0),
+            "inside_objects_link": (self.inside_objects_link, 0.0, 100.0),
             "seam_vote_m": (self.seam_vote_m, 0.0, 1.0),
             "seam_angle_deg": (self.seam_angle_deg, 0.0, 90.0),
             "seam_flatness": (self.seam_flatness, 0.0, 1.0 / 3.0),

@@ -123,6 +123,7 @@ def refinement_metrics(
         "table_surfaces": int(sum(p.table_points for p in result.planes.planes)),
         "floor_labels_above_floor": 0 if nf is None else int(nf.sum()),
         "sor_outliers": len(result.sor_outliers),
+        "structure_inside_objects": len(result.opened),
         "regrown": len(result.regrown),
         "adopted_by_host": len(result.adopted),
         "held_above_tables": result.above_tables,

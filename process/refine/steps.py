@@ -20,6 +20,7 @@ from process.refine.cells import attached_clusters, capped_cells, sparse_inside_
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
+from process.refine.inside import structure_inside_objects
 from process.refine.orphans import adopt_orphans
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
@@ -90,6 +91,8 @@ class RefineResult:
     enclosed: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices on bare faces enclosed by one object that took its class (faces.py; they
     # are among faces_filled too)
+    opened: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of floor and wall clusters amid object points, opened to regrowth (inside.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -178,6 +181,14 @@ def refine(
     clusters_ii = np.zeros(len(cloud), np.int32)
     labels_ii[objects], clusters_ii[objects] = labels, clusters
     labels_iii, clusters_iii = labels_ii.copy(), clusters_ii.copy()
+    opened, inside = np.zeros(len(objects), bool), np.zeros(0, np.intp)
+    if cfg.regrowth and cfg.inside_objects_share > 0:  # structure segments inside objects
+        inside = structure_inside_objects(
+            cloud.points, labels_ii, clusters_ii,
+            share=cfg.inside_objects_share, link=cfg.inside_objects_link,
+        )  # fmt: skip
+        opened = np.isin(objects, inside)
+        labels, clusters = np.where(opened, 0, labels), np.where(opened, 0, clusters)
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
     filled = orphans = strays_rejoined = enclosed = np.zeros(0, np.intp)
@@ -195,7 +206,7 @@ def refine(
         keep_out = (
             behind
             if cfg.regrow_structure
-            else behind | np.isin(network[objects], STRUCTURAL_LABELS)
+            else behind | (np.isin(network[objects], STRUCTURAL_LABELS) & ~opened)
         )
         # ... and lying on a large upright face the network leaves bare: furniture it has no
         # class for (a cabinet's front under a plant on it; faces.py)
@@ -288,7 +299,7 @@ def refine(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
         rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
-        strays_rejoined, enclosed,
+        strays_rejoined, enclosed, inside,
     )  # fmt: skip
 
 
