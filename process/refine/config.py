@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -272,5 +273,11 @@ class RefineConfig:
                 "refinement.table_heights_m must be [low, high] metres above the floor with "
                 f"0 <= low <= high <= 10, got {list(self.table_heights_m)}"
             )
-        if self.up is not None and (len(self.up) != 3 or sum(v * v for v in self.up) < 1e-12):
-            raise ConfigError(f"refinement.up must be a non-zero 3-vector or absent, got {self.up}")
+        if self.up is not None and (
+            len(self.up) != 3
+            or not all(math.isfinite(v) for v in self.up)
+            or sum(v * v for v in self.up) < 1e-12
+        ):
+            raise ConfigError(
+                f"refinement.up must be a finite non-zero 3-vector or absent, got {self.up}"
+            )

@@ -159,6 +159,8 @@ def refine(
             f"refinement expects RECORDING.md label ids 0..{NUM_LABELS - 1}, "
             f"found {int(cloud.labels.max())}; map the labels first"
         )
+    if up is not None and not np.isfinite(up).all():
+        raise StageError(f"refinement expects a finite gravity-up, got {list(up)}; pass None")
     seconds: dict[str, float] = {}
     start = tick = time.perf_counter()
 

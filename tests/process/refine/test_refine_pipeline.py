@@ -182,6 +182,12 @@ def test_labels_outside_the_recording_table_are_refused() -> None:
         refine(labelled(grid_patch((0.0, 0.2), (0.0, 0.2)), 20), RefineConfig())
 
 
+def test_a_gravity_up_that_is_not_finite_is_refused() -> None:
+    cloud = labelled(grid_patch((0.0, 0.2), (0.0, 0.2)), 4)
+    with pytest.raises(StageError, match="finite gravity-up"):
+        refine(cloud, RefineConfig(), up=np.array([np.nan, 0.0, 1.0]))
+
+
 @pytest.mark.parametrize(
     "field",
     [
@@ -190,6 +196,8 @@ def test_labels_outside_the_recording_table_are_refused() -> None:
         {"plane_distance_m": 0.0},
         {"plane_sample_points": 2},
         {"up": (0.0, 0.0, 0.0)},
+        {"up": (float("nan"), 0.0, 1.0)},
+        {"up": (0.0, float("inf"), 1.0)},
     ],
 )
 def test_bad_refine_config_values_are_refused(field: dict[str, object]) -> None:
