@@ -133,6 +133,8 @@ class RefineConfig:
     regrow_own_class_first: bool = True  # regrowth gives points back to their phase-I class first
     regrow_structure: bool = False  # regrowth may turn points the network calls structure
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
+    table_legs: bool = True  # chair clusters under a table's top, floor to top, are its legs
+    # (legs.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
     # neighbours are at least this share objects is opened to regrowth (inside.py; 0: never)
     inside_objects_link: float = 3.0  # ... neighbours within this many object point spacings
@@ -182,6 +184,7 @@ class RefineConfig:
             "object_bridge_m": 0.0,
             "regrow_structure": True,
             "inside_objects_share": 0.0,
+            "table_legs": False,
         }
         return cls(**{**paper, **overrides})
 

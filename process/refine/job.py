@@ -136,6 +136,7 @@ def refinement_metrics(
         "seam_relabelled": len(result.seams),
         "piece_relabelled": len(result.pieces),
         "raised_relabelled": len(result.raised),
+        "legs_relabelled": len(result.legs),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
         "strays_rejoined": len(result.strays),

@@ -21,6 +21,7 @@ from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.inside import structure_inside_objects
+from process.refine.legs import legs_under_tables
 from process.refine.orphans import adopt_orphans
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
@@ -93,6 +94,8 @@ class RefineResult:
     # are among faces_filled too)
     opened: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of floor and wall clusters amid object points, opened to regrowth (inside.py)
+    legs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of chair clusters under a table's top made its legs (legs.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -140,9 +143,10 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points the seam, piece and raised votes relabelled, with their new class."""
+        """Return the points the seam, piece, raised and legs votes relabelled, with their class."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
-        return cloud.select(np.union1d(np.union1d(self.seams, self.pieces), self.raised))
+        votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
+        return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
         """Return the points regrowth labelled, with their new class and cluster."""
@@ -271,13 +275,19 @@ def refine(
             )  # fmt: skip
             regrown = np.union1d(regrown, strays_rejoined)  # shown with the regrown points
     lap("regrowth")
-    raised, sunk = np.zeros(0, np.intp), 0
+    raised, sunk, legs = np.zeros(0, np.intp), 0, np.zeros(0, np.intp)
+    tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
     if cfg.raised_vote and planes.up is not None:
-        tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
         lifted = raised_off_tables(cloud.points, labels_iii, clusters_iii, tops, planes.up)
         labels_iii, clusters_iii, raised = lifted.labels, lifted.clusters, lifted.relabelled
         sunk = lifted.sunk
         lap("raised")
+    if cfg.table_legs and planes.up is not None:
+        floors = [p.model for p in planes.planes if p.label == Label.FLOOR]
+        labels_iii, clusters_iii, legs = legs_under_tables(
+            cloud.points, labels_iii, clusters_iii, tops, floors[0] if floors else None, planes.up
+        )
+        lap("legs")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -301,7 +311,7 @@ def refine(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
         rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
-        strays_rejoined, enclosed, inside,
+        strays_rejoined, enclosed, inside, legs,
     )  # fmt: skip
 
 

@@ -1,0 +1,96 @@
+"""A table's legs the network called chair go back to the table; chairs under it stay chairs."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from helpers_refine import grid_patch
+
+from capture.recording import Label
+from process.refine.legs import legs_under_tables
+
+TABLE, CHAIR = Label.TABLE, Label.CHAIR
+UP = np.array([0.0, 0.0, 1.0])
+FLOOR = np.array([0.0, 0.0, 1.0, 0.0])
+TOP = np.array([0.0, 0.0, 1.0, -0.73])
+
+Points = npt.NDArray[np.float32]
+
+
+def _column(x: float, y: float, z: tuple[float, float]) -> Points:
+    """A 4 x 4 cm leg from z[0] to z[1], its faces at 1 cm spacing."""
+    heights = np.arange(z[0], z[1], 0.01)
+    ring = [(dx, dy) for dx in np.arange(0.0, 0.04, 0.01) for dy in (0.0, 0.03)]
+    ring += [(dx, dy) for dx in (0.0, 0.03) for dy in (0.01, 0.02)]
+    return np.array([(x + dx, y + dy, h) for h in heights for dx, dy in ring], np.float32)
+
+
+def _scene() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], dict[str, slice]]:
+    """A 1.2 x 0.8 m table top at 73 cm, cluster 1; one leg the network called chair whole
+    (cluster 2), one chair below and table above its middle (cluster 3); a chair pushed half
+    under the table whose back rises above the top (4), a stool under it (5), touching nothing
+    of the table, and a chair tucked right under it, its back 3 cm below the top (6): it
+    passes every test but a leg's thinness."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.73, step=0.01)
+    leg_a = _column(0.02, 0.02, (0.0, 0.72))
+    leg_b_low, leg_b_high = _column(1.14, 0.74, (0.0, 0.36)), _column(1.14, 0.74, (0.36, 0.72))
+    seat = grid_patch((0.3, 0.75), (0.5, 0.95), z=0.45, step=0.01)
+    back = grid_patch((0.3, 0.75), (0.46, 0.95), step=0.01)[:, [0, 2, 1]]
+    back[:, 1] = 0.96  # the back at y = 0.96: outside the top, rising to 95 cm
+    chair = np.concatenate([seat, back, _column(0.3, 0.5, (0.0, 0.45))])
+    stool = np.concatenate(
+        [grid_patch((0.1, 0.35), (0.15, 0.4), z=0.45), _column(0.2, 0.25, (0.0, 0.44))]
+    )
+    # a chair tucked right under, its back up to 70 cm: under the top, reaching it, on the floor
+    tucked_back = grid_patch((0.7, 1.1), (0.46, 0.7), step=0.01)[:, [0, 2, 1]]
+    tucked_back[:, 1] = 0.1
+    tucked = np.concatenate(
+        [grid_patch((0.7, 1.1), (0.1, 0.5), z=0.45), tucked_back, _column(0.7, 0.1, (0.0, 0.45))]
+    )
+    parts = {
+        "top": (top, TABLE, 1),
+        "leg_a": (leg_a, CHAIR, 2),
+        "leg_b_low": (leg_b_low, CHAIR, 3),
+        "leg_b_high": (leg_b_high, TABLE, 1),
+        "chair": (chair, CHAIR, 4),
+        "stool": (stool, CHAIR, 5),
+        "tucked": (tucked, CHAIR, 6),
+    }
+    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
+    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
+    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
+    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
+    where = {
+        name: slice(int(e - len(p)), int(e))
+        for (name, (p, _, _)), e in zip(parts.items(), ends, strict=True)
+    }
+    return points, labels, clusters, where
+
+
+def test_legs_called_chair_become_the_table_chairs_under_it_stay() -> None:
+    points, labels, clusters, where = _scene()
+    surface = np.arange(where["top"].start, where["top"].stop)
+    out, ids, changed = legs_under_tables(points, labels, clusters, [(TOP, surface)], FLOOR, UP)
+    for leg in ("leg_a", "leg_b_low"):
+        assert (out[where[leg]] == TABLE).all() and (ids[where[leg]] == 1).all()
+    for name in ("chair", "stool", "tucked"):
+        assert (out[where[name]] == CHAIR).all()
+    expected = np.r_[np.arange(where["leg_a"].start, where["leg_a"].stop),
+                     np.arange(where["leg_b_low"].start, where["leg_b_low"].stop)]  # fmt: skip
+    assert np.array_equal(changed, np.sort(expected))
+    assert (labels[where["leg_a"]] == CHAIR).all()  # the input is not changed in place
+    # without a floor plane the rule says nothing
+    out, _, changed = legs_under_tables(points, labels, clusters, [(TOP, surface)], None, UP)
+    assert len(changed) == 0 and np.array_equal(out, labels)
+
+
+def test_a_leg_standing_clear_of_the_floor_is_no_leg() -> None:
+    """What hangs under a top without reaching the floor (a drawer unit the network called
+    chair) is left: a leg stands on the floor."""
+    points, labels, clusters, where = _scene()
+    surface = np.arange(where["top"].start, where["top"].stop)
+    lifted = points.copy()
+    lifted[where["leg_a"], 2] = np.clip(lifted[where["leg_a"], 2], 0.3, None)
+    out, _, _ = legs_under_tables(lifted, labels, clusters, [(TOP, surface)], FLOOR, UP)
+    assert (out[where["leg_a"]] == CHAIR).all()
+    assert (out[where["leg_b_low"]] == TABLE).all()
