@@ -119,3 +119,32 @@ def test_a_crown_beyond_r1_joins_the_pot_under_it_with_its_stem_and_flank_strays
     assert joined.tolist() == list(range(start[1], start[3]))  # the crown and the stem only
     assert (clusters[start[1] : start[3]] == 1).all()  # into its pot's cluster
     assert (labels[start[4] :] == 0).all()  # the flank's strays, the far crown, the specks
+
+
+def test_leaves_seen_behind_a_wall_stay_out_of_the_plant_in_front_of_it() -> None:
+    """The plant stands 15 cm before a wall; what the network calls plant more than
+    `wall_keep_out_m` behind the wall plane (through a window, a mirror, depth noise) is no
+    foliage of it: neither SOR's outliers there nor DBSCAN's leftovers rejoin it."""
+    rng = np.random.default_rng(0)
+    pot, leaves = _plant(rng)
+    floor = np.column_stack(
+        [rng.uniform(-2.5, 0.25, 20_000), rng.uniform(-1.5, 1.5, 20_000), np.zeros(20_000)]
+    )
+    y, z = np.meshgrid(np.arange(-1.5, 1.5, 0.02), np.arange(0.0, 2.5, 0.02))
+    wall = np.column_stack([np.full(y.size, 0.25), y.ravel(), z.ravel()])  # the plane x = 0.25
+    shift = np.array([0.1, 0.0, 0.0], np.float32)
+    points = np.concatenate([floor, wall, pot + shift, leaves + shift]).astype(np.float32)
+    labels = np.zeros(len(points), np.uint8)
+    labels[len(floor) + len(wall) :] = Label.PLANT
+    cloud = LabelledCloud(points, np.zeros((len(points), 3), np.uint8), labels)
+    leaf = np.arange(len(points) - len(leaves), len(points))
+    behind = leaf[points[leaf, 0] > 0.25 + 0.03 + 0.005]
+    front = leaf[points[leaf, 0] < 0.25 - 0.03]
+    assert len(behind) >= 40 and len(front) >= 200
+    cfg = RefineConfig()
+    out = refine(cloud, cfg, up=np.array([0, 0, 1.0]))
+    assert not np.isin(behind, out.strays).any()
+    assert (out.labels_iii[behind] != Label.PLANT).all()
+    assert (out.labels_iii[front] == Label.PLANT).mean() > 0.75  # the plant's own come back
+    blind = refine(cloud, dataclasses.replace(cfg, wall_keep_out_m=0.0), up=np.array([0, 0, 1.0]))
+    assert (blind.labels_iii[behind] == Label.PLANT).mean() > 0.5  # without the wall test
