@@ -187,8 +187,10 @@ def _labelled_up(
         )
         if score > 0 and (best is None or score > best[0]):
             best = (score, normal if hint is None else normal * np.sign(normal @ hint))
-    if best is None or hint is not None:
-        return None if best is None else best[1]
+    if best is None:
+        return None
+    if hint is not None:
+        return best[1]
     assert points is not None, "without a hint the points say which way is up"
     return _facing(points, best[1], labels)
 

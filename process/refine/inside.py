@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from capture.recording import STRUCTURAL_LABELS, Label
+from capture.recording import OBJECT_LABELS, STRUCTURAL_LABELS, Label
 from process.refine.graph import point_spacing
 
 _PROBE = 300  # points of a cluster whose neighbourhoods are looked at (an even sample)
@@ -46,20 +46,21 @@ def structure_inside_objects(
     The neighbourhood: labelled points of other clusters or planes within `link` times the
     object points' spacing of an even sample of the cluster's points.
     """
-    structure = np.isin(labels, _OPENED) & (clusters > 0)
-    objects = labels >= Label.TABLE
-    if not structure.any() or not objects.any():
+    structure = np.flatnonzero(np.isin(labels, _OPENED) & (clusters > 0))
+    objects = np.isin(labels, OBJECT_LABELS)
+    if len(structure) == 0 or not objects.any():
         return np.zeros(0, np.intp)
     radius = link * point_spacing(points[objects])
     tree = cKDTree(points)
+    structure = structure[np.argsort(clusters[structure], kind="stable")]  # grouped by cluster
+    starts = np.flatnonzero(np.r_[True, np.diff(clusters[structure]) != 0])
     opened: list[npt.NDArray[np.intp]] = []
-    for cluster in np.unique(clusters[structure]):
-        members = np.flatnonzero(structure & (clusters == cluster))
+    for members in np.split(structure, starts[1:]):
         probe = points[members[:: max(1, len(members) // _PROBE)]]
         near = np.unique(np.concatenate(tree.query_ball_point(probe, radius)).astype(np.intp))
-        near = near[clusters[near] != cluster]  # ids are unique over classes; planes: 0
+        near = near[clusters[near] != clusters[members[0]]]  # ids unique over classes; planes 0
         n_objects = int(objects[near].sum())
         n_structure = int(np.isin(labels[near], STRUCTURAL_LABELS).sum())
         if n_objects and n_objects >= share * (n_objects + n_structure):
             opened.append(members)
-    return np.concatenate(opened) if opened else np.zeros(0, np.intp)
+    return np.sort(np.concatenate(opened)) if opened else np.zeros(0, np.intp)

@@ -73,29 +73,28 @@ def legs_under_tables(
     if len(chair) == 0:
         return out_labels, out_clusters, np.zeros(0, np.intp)
     chair = chair[np.argsort(clusters[chair], kind="stable")]  # grouped by cluster
-    ids, starts = np.unique(clusters[chair], return_index=True)
+    starts = np.flatnonzero(np.r_[True, np.diff(clusters[chair]) != 0])
     groups = np.split(chair, starts[1:])
+    sizes = np.diff(np.r_[starts, len(chair)])
     lowest = np.minimum.reduceat(above_floor[chair], starts)
     changed: list[npt.NDArray[np.intp]] = []
-    taken = np.zeros(len(ids), bool)
+    taken = np.zeros(len(starts), bool)
     for model, surface in tops:
         model = model if float(model[:3] @ up) >= 0 else -model
+        offset = pts @ model[:3].astype(np.float32) + np.float32(model[3])
+        top = float(np.percentile(offset[surface], 75))  # its upper face (raised.py's reading)
+        highest = np.maximum.reduceat(offset[chair], starts)
+        candidates = np.flatnonzero(~taken & (highest <= top + BAND_M) & (lowest <= FLOOR_M))
         table = out_clusters[surface][out_labels[surface] == Label.TABLE]
         table = table[table > 0]
-        if len(table) == 0:
+        if len(candidates) == 0 or len(table) == 0:
             continue
         host = int(np.bincount(table).argmax())
         host_points = pts[out_clusters == host]
         host_tree = cKDTree(host_points)
         link = LINK * point_spacing(host_points, host_tree)
-        offset = pts @ model[:3].astype(np.float32) + np.float32(model[3])
-        top = float(np.percentile(offset[surface], 75))
         uv_top = plane_uv(pts[surface], model)
-        highest = np.maximum.reduceat(offset[chair], starts)
-        sizes = np.diff(np.r_[starts, len(chair)])
-        candidates = ~taken & (highest <= top + BAND_M) & (lowest <= FLOOR_M)
-        candidates &= sizes < len(host_points)
-        for k in np.flatnonzero(candidates):
+        for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
             if highest[k] < top - REACH_M and not _touches(pts[members], host_tree, link):
                 continue

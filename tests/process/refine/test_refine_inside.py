@@ -11,6 +11,7 @@ from helpers_refine import grid_patch, labelled
 from capture.recording import Label
 from process.refine import RefineConfig, refine
 from process.refine.inside import structure_inside_objects
+from process.refine.job import refinement_metrics
 
 CHAIR, WALL, FLOOR = Label.CHAIR, Label.WALL, Label.FLOOR
 STEP = 0.01
@@ -49,6 +50,10 @@ def test_a_wall_cluster_among_object_points_is_opened_a_wall_piece_beside_a_wall
     assert len(structure_inside_objects(points, labels, clusters, share=1.0, link=3.0)) == len(back)
     # out of reach of the seat (a link shorter than the 1 cm gap) the back has no neighbours
     assert len(structure_inside_objects(points, labels, clusters, share=0.6, link=0.5)) == 0
+    # a ceiling cluster amid object points stays: the ceiling over a tall object
+    ceiling = labels.copy()
+    ceiling[back_rows] = Label.CEILING
+    assert len(structure_inside_objects(points, ceiling, clusters, share=0.6, link=3.0)) == 0
 
 
 def test_a_chairs_back_called_wall_in_the_middle_of_a_room_is_regrown_as_chair() -> None:
@@ -77,6 +82,8 @@ def test_a_chairs_back_called_wall_in_the_middle_of_a_room_is_regrown_as_chair()
     assert not result.planes.structural[back_rows].any()  # off every plane
     assert (result.labels_ii[back_rows] == WALL).all()  # DBSCAN keeps it: a wall cluster
     assert (result.labels_iii[back_rows] == CHAIR).mean() > 0.99
+    opened = refinement_metrics(result, gt_cloud=None)["points"]["structure_inside_objects"]
+    assert opened == len(back) == len(result.opened)
     assert (result.labels_iii[: len(floor)] == FLOOR).mean() > 0.99
     off = refine(cloud, dataclasses.replace(RefineConfig(), inside_objects_share=0.0), up=up)
     assert (off.labels_iii[back_rows] == WALL).all()

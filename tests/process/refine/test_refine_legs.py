@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import numpy.typing as npt
-from helpers_refine import grid_patch
+from helpers_refine import grid_patch, labelled
 
 from capture.recording import Label
+from process.refine import RefineConfig, refine
+from process.refine.job import refinement_metrics
 from process.refine.legs import legs_under_tables
 
 TABLE, CHAIR = Label.TABLE, Label.CHAIR
@@ -94,3 +98,28 @@ def test_a_leg_standing_clear_of_the_floor_is_no_leg() -> None:
     out, _, _ = legs_under_tables(lifted, labels, clusters, [(TOP, surface)], FLOOR, UP)
     assert (out[where["leg_a"]] == CHAIR).all()
     assert (out[where["leg_b_low"]] == TABLE).all()
+
+
+def test_the_refinement_gives_a_leg_called_chair_to_its_table() -> None:
+    """The whole refinement on a floor and a table on four legs, one of them called chair:
+    the plane step finds the top and the floor, DBSCAN keeps the leg as a chair, and only the
+    leg rule gives it back (counted in metrics.json)."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.73, step=0.01)
+    corners = ((0.02, 0.02), (1.14, 0.02), (0.02, 0.74), (1.14, 0.74))
+    legs = [_column(x, y, (0.0, 0.72)) for x, y in corners]
+    floor = grid_patch((-1.0, 2.5), (-1.0, 2.0), step=0.02)
+    points = np.concatenate([top, *legs, floor])
+    sizes = [len(top) + 3 * len(legs[0]), len(legs[3]), len(floor)]
+    labels = np.repeat(np.array([TABLE, CHAIR, Label.FLOOR], np.uint8), sizes)
+    noise = np.random.default_rng(0).normal(0.0, 0.002, points.shape).astype(np.float32)
+    cloud = labelled(points + noise, labels)
+    leg = np.arange(sizes[0], sizes[0] + sizes[1])
+    cfg = RefineConfig()
+    result = refine(cloud, cfg, up=UP)
+    off_floor = leg[result.labels_ii[leg] == CHAIR]  # DBSCAN keeps it a chair ...
+    assert len(off_floor) >= 0.95 * len(leg)  # ... but its foot, in the floor plane's band
+    assert (result.labels_iii[off_floor] == TABLE).all()
+    assert np.array_equal(result.legs, off_floor)
+    assert refinement_metrics(result, gt_cloud=None)["points"]["legs_relabelled"] == len(off_floor)
+    off = refine(cloud, dataclasses.replace(cfg, table_legs=False), up=UP)
+    assert (off.labels_iii[off_floor] == CHAIR).all()

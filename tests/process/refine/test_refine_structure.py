@@ -75,6 +75,12 @@ def test_without_a_hint_the_labelled_floor_outvotes_shelves_lining_one_wall() ->
     assert blind.up is not None and abs(blind.up[1]) > 0.99  # the wall's normal: on its side
     flipped = segment_planes(points * np.float32(-1.0), CFG, up=None, labels=labels)
     assert flipped.up is not None and flipped.up @ [0.0, 0.0, -1.0] == pytest.approx(1.0, abs=1e-3)
+    # turned upside down with its floor called ceiling: a ceiling alone says up too (away
+    # from the rest of the room)
+    hung = np.where(labels == Label.FLOOR, Label.CEILING, labels).astype(np.uint8)
+    above = segment_planes(points * np.float32(-1.0), CFG, up=None, labels=hung)
+    assert above.up_source == "labelled planes"
+    assert above.up is not None and above.up @ [0.0, 0.0, 1.0] == pytest.approx(1.0, abs=1e-3)
 
 
 def test_a_floor_seen_from_above_with_no_wall_is_floor_when_the_network_says_so() -> None:
