@@ -191,9 +191,10 @@ def refine(
     if cfg.regrowth and cfg.inside_objects_share > 0:  # structure segments inside objects
         inside = structure_inside_objects(
             cloud.points, labels_ii, clusters_ii,
-            share=cfg.inside_objects_share, link=cfg.inside_objects_link,
+            share=cfg.inside_objects_share, link=cfg.inside_objects_link, network=network,
         )  # fmt: skip
         opened = np.isin(objects, inside)
+        inside = objects[opened]  # not SOR's outliers: they take no part in regrowth
         labels, clusters = np.where(opened, 0, labels), np.where(opened, 0, clusters)
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
