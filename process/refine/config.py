@@ -48,6 +48,9 @@ class RefineConfig:
     # plane_distance_m), where that is past plane_distance_m; 0: RANSAC's band (walls.py)
     floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
     # (walls.py; 0: the network's floor labels stand wherever they are)
+    floor_band_regrows: bool = True  # "floor" off the planes, past plane_distance_m and up to
+    # floor_label_max_m above the floor plane, is open to regrowth; what no object takes stays
+    # floor (walls.py)
     plane_object_width_m: float = 0.25  # object-labelled regions this wide on a plane stay
     wall_object_share: float = 0.25  # ... on a wall, cells where object labels are the most of
     # the labelled points and over this share of all (floor and ceiling: over half; planes.py)
@@ -171,6 +174,7 @@ class RefineConfig:
             "structure_band_sigmas": 0.0,
             "wall_noise_sigmas": 0.0,
             "floor_label_max_m": 0.0,
+            "floor_band_regrows": False,
             "table_surfaces": False,
             "table_top_m": 0.0,
             "rejoin_own_class": False,

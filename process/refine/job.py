@@ -124,6 +124,7 @@ def refinement_metrics(
         "floor_labels_above_floor": 0 if nf is None else int(nf.sum()),
         "sor_outliers": len(result.sor_outliers),
         "structure_inside_objects": len(result.opened),
+        "floor_band_regrown": len(result.floor_band),
         "regrown": len(result.regrown),
         "adopted_by_host": len(result.adopted),
         "held_above_tables": result.above_tables,

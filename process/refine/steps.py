@@ -30,7 +30,7 @@ from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
-from process.refine.walls import behind_walls
+from process.refine.walls import behind_walls, floor_said_low
 
 logger = logging.getLogger(__name__)
 
@@ -96,6 +96,8 @@ class RefineResult:
     # input indices of floor and wall clusters amid object points, opened to regrowth (inside.py)
     legs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of chair clusters under a table's top made its legs (legs.py)
+    floor_band: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices the network calls floor just over the floor's band that objects took
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -195,11 +197,15 @@ def refine(
         )  # fmt: skip
         opened = np.isin(objects, inside)
         inside = objects[opened]  # not SOR's outliers: they take no part in regrowth
-        labels, clusters = np.where(opened, 0, labels), np.where(opened, 0, clusters)
+    low = np.zeros(len(objects), bool)  # the network's "floor" just over the floor's band
+    if cfg.regrowth and cfg.floor_band_regrows:
+        low = floor_said_low(points, planes.planes, planes.up, network[objects], cfg)
+        opened |= low
+    labels, clusters = np.where(opened, 0, labels), np.where(opened, 0, clusters)
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
     filled = orphans = strays_rejoined = enclosed = np.zeros(0, np.intp)
-    tabletop = np.zeros(0, np.intp)
+    tabletop = floor_band = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
         # only objects grow: structure is the plane step's, and a leftover wall or floor
@@ -275,6 +281,9 @@ def refine(
                 crown_min=crown_min,
             )  # fmt: skip
             regrown = np.union1d(regrown, strays_rejoined)  # shown with the regrown points
+        left = objects[low & (labels_iii[objects] == 0)]  # no object took them: floor again
+        labels_iii[left], clusters_iii[left] = labels_ii[left], clusters_ii[left]
+        floor_band = objects[low & np.isin(labels_iii[objects], OBJECT_LABELS)]
     lap("regrowth")
     raised, sunk, legs = np.zeros(0, np.intp), 0, np.zeros(0, np.intp)
     tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
@@ -312,7 +321,7 @@ def refine(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
         rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
-        strays_rejoined, enclosed, inside, legs,
+        strays_rejoined, enclosed, inside, legs, floor_band,
     )  # fmt: skip
 
 
