@@ -47,6 +47,12 @@ def components(
     return int(count), np.asarray(ids, np.int32)
 
 
+def radius_components(points: npt.NDArray[np.floating], radius: float) -> npt.NDArray[np.int32]:
+    """Return a component id per point: the components of the graph of pairs within `radius`."""
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    return components(len(points), pairs[:, 0], pairs[:, 1])[1]
+
+
 def class_pieces(
     dist: npt.NDArray[np.float64],
     nb: npt.NDArray[np.intp],

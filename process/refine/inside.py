@@ -32,7 +32,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, STRUCTURAL_LABELS, Label
-from process.refine.graph import components, point_spacing
+from process.refine.graph import point_spacing, radius_components
 
 _PROBE = 300  # points of a cluster whose neighbourhoods are looked at (an even sample)
 _OPENED = (Label.FLOOR, Label.WALL)  # structure labels a segment inside objects may carry
@@ -68,7 +68,7 @@ def structure_inside_objects(
     tree = cKDTree(points)
     ids = clusters.copy()
     if len(dropped):
-        ids[dropped] = int(clusters.max()) + 1 + _segments(points[dropped], radius)
+        ids[dropped] = int(clusters.max()) + 1 + radius_components(points[dropped], radius)
         structure = np.concatenate([structure, dropped])
     structure = structure[np.argsort(ids[structure], kind="stable")]  # grouped by segment
     starts = np.flatnonzero(np.r_[True, np.diff(ids[structure]) != 0])
@@ -82,9 +82,3 @@ def structure_inside_objects(
         if n_objects and n_objects >= share * (n_objects + n_structure):
             opened.append(members)
     return np.sort(np.concatenate(opened)) if opened else np.zeros(0, np.intp)
-
-
-def _segments(points: npt.NDArray[np.float32], radius: float) -> npt.NDArray[np.int32]:
-    """Return a segment id per point: the components of the graph of pairs within `radius`."""
-    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
-    return components(len(points), pairs[:, 0], pairs[:, 1])[1]

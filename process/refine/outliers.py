@@ -7,7 +7,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
-from process.refine.graph import components, point_spacing
+from process.refine.graph import point_spacing, radius_components
 from process.refine.regrowth import frame
 
 LINK = 2.0  # a stray with another plant-labelled point this many point spacings away is a leaf
@@ -147,8 +147,7 @@ def _crowns(
     """
     plant = int(Label.PLANT)
     xyz = points[waiting].astype(np.float64) @ rotate.T
-    pairs = cKDTree(xyz).query_pairs(r1_m, output_type="ndarray")
-    _, group = components(len(xyz), pairs[:, 0], pairs[:, 1])
+    group = radius_components(xyz, r1_m)
     refined = np.flatnonzero((labels == plant) & (clusters > 0))
     ids, row = np.unique(clusters[refined], return_inverse=True)
     if len(ids) == 0:

@@ -30,7 +30,7 @@ from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
-from process.refine.walls import behind_walls, floor_said_low
+from process.refine.walls import behind_walls, floor_said_low, main_floor
 
 logger = logging.getLogger(__name__)
 
@@ -293,10 +293,11 @@ def refine(
         sunk = lifted.sunk
         lap("raised")
     if cfg.table_legs and planes.up is not None:
-        floors = [p.model for p in planes.planes if p.label == Label.FLOOR]
+        floor = main_floor(planes.planes)
         labels_iii, clusters_iii, legs = legs_under_tables(
-            cloud.points, labels_iii, clusters_iii, tops, floors[0] if floors else None, planes.up
-        )
+            cloud.points, labels_iii, clusters_iii, tops, None if floor is None else floor.model,
+            planes.up,
+        )  # fmt: skip
         lap("legs")
     seams = np.zeros(0, np.intp)
     neighbours = None

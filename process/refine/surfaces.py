@@ -37,7 +37,7 @@ from process.refine.plane_grid import (
     over_footprint,
     plane_uv,
 )
-from process.refine.walls import facing, wall_band
+from process.refine.walls import facing, main_floor, wall_band
 
 if TYPE_CHECKING:
     from process.refine.planes import Plane
@@ -64,11 +64,11 @@ def table_surfaces(
     if not cfg.table_surfaces or up is None or not planes:
         return planes, to_table
     heights = points @ up.astype(np.float32)
-    floors = [p for p in planes if p.label == Label.FLOOR]
-    if not floors:
+    floor = main_floor(planes)
+    if floor is None:
         note = "no floor plane: a table surface is found by its height above the floor"
         return tuple(p if p.label else replace(p, note=note) for p in planes), to_table
-    floor_m = max(floors, key=lambda p: len(p.removed)).height_m
+    floor_m = floor.height_m
     centre = points.mean(axis=0, dtype=np.float64)
     walls = []  # (model facing the room, how far in front its own points reach)
     for wall in (p for p in planes if p.label == Label.WALL):

@@ -338,6 +338,13 @@ def _wall_noise(
     return (median, width) if width > cfg.plane_distance_m else None
 
 
+def main_floor(planes: tuple[Plane, ...]) -> Plane | None:
+    """Return the floor plane with the most points of its own (None: no floor plane)."""
+    return max(
+        (p for p in planes if p.label == Label.FLOOR), key=lambda p: len(p.removed), default=None
+    )
+
+
 def floor_said_above(
     heights: npt.NDArray[np.float32] | None,
     planes: tuple[Plane, ...],
@@ -346,11 +353,12 @@ def floor_said_above(
     cfg: RefineConfig,
 ) -> npt.NDArray[np.bool_] | None:
     """Return the points labelled floor, off the planes, over `floor_label_max_m` above it."""
-    floors = [p for p in planes if p.label == Label.FLOOR and len(p.removed)]
-    if heights is None or labels is None or not floors or cfg.floor_label_max_m <= 0:
+    floor = main_floor(planes)
+    if heights is None or labels is None or floor is None or not len(floor.removed):
         return None
-    floor_m = max(floors, key=lambda p: len(p.removed)).height_m
-    above = heights > floor_m + cfg.floor_label_max_m
+    if cfg.floor_label_max_m <= 0:
+        return None
+    above = heights > floor.height_m + cfg.floor_label_max_m
     said: npt.NDArray[np.bool_] = (labels == Label.FLOOR) & above & ~structural
     return said
 
@@ -367,11 +375,10 @@ def floor_said_low(
     `points` are off every structural plane and `labels` their network labels; the band is
     `plane_distance_m` over the largest floor plane.
     """
-    floors = [p for p in planes if p.label == Label.FLOOR and len(p.removed)]
-    if up is None or not floors or cfg.floor_label_max_m <= 0:
+    floor = main_floor(planes)
+    if up is None or floor is None or not len(floor.removed) or cfg.floor_label_max_m <= 0:
         return np.zeros(len(points), bool)
-    floor_m = max(floors, key=lambda p: len(p.removed)).height_m
-    heights = points @ up.astype(np.float32) - np.float32(floor_m)
+    heights = points @ up.astype(np.float32) - np.float32(floor.height_m)
     low: npt.NDArray[np.bool_] = (labels == Label.FLOOR) & (heights > cfg.plane_distance_m)
     return low & (heights <= cfg.floor_label_max_m)
 

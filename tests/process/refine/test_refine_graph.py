@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from process.refine.graph import components, knn_edges
+from process.refine.graph import components, knn_edges, radius_components
 
 
 def test_knn_edges_leave_out_each_point_itself() -> None:
@@ -41,3 +41,14 @@ def test_class_pieces_link_one_label_within_the_spacing_bound() -> None:
     assert len({piece[0], piece[3], piece[5]}) == 3  # the gap of 5 cm splits the 4s
     assert (np.abs(x[i] - x[j]) < 0.025).all() and len(i) > 0  # only edges under the link
     assert ((labels[i] != labels[j]) & (np.minimum(i, j) == 2)).any()  # the 4-5 contact stays
+
+
+def test_radius_components_link_points_within_the_radius_only() -> None:
+    """Two rows of points 1 cm apart, 5 cm between the rows: one component each at 2 cm, one
+    in all at 6 cm, every point alone at 5 mm."""
+    row = np.column_stack([np.arange(0.0, 0.1, 0.01), np.zeros(10), np.zeros(10)])
+    points = np.concatenate([row, row + np.array([0.0, 0.05, 0.0])])
+    two = radius_components(points, 0.02)
+    assert len(np.unique(two[:10])) == 1 and len(np.unique(two[10:])) == 1 and two[0] != two[10]
+    assert len(np.unique(radius_components(points, 0.06))) == 1
+    assert len(np.unique(radius_components(points, 0.005))) == 20

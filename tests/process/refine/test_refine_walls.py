@@ -17,7 +17,13 @@ from process.refine.job import refinement_metrics
 from process.refine.plane_grid import wide_object_regions
 from process.refine.planes import Plane, segment_planes
 from process.refine.ransac import best_plane
-from process.refine.walls import behind_walls, furniture_fronts, objects_on_walls, widen_bands
+from process.refine.walls import (
+    behind_walls,
+    furniture_fronts,
+    main_floor,
+    objects_on_walls,
+    widen_bands,
+)
 
 CFG = RefineConfig(plane_min_points=2000, plane_max_remaining=100)
 
@@ -285,3 +291,15 @@ def test_a_layer_before_a_wall_from_floor_to_top_is_the_walls_own_face() -> None
         out = objects_on_walls(points, planes, RefineConfig(), points[:, 2].copy())
         assert out[1].on_wall == (m if hangs else 0)
         assert objects_on_walls(points, planes, RefineConfig())[1].on_wall == m  # no heights
+
+
+def test_main_floor_is_the_floor_plane_with_the_most_points_of_its_own() -> None:
+    """A drifting map's floor in two planes: the larger is the floor every rule measures from
+    (the plane step's order is RANSAC's, not size), whatever comes first; no floor, None."""
+    level = np.array([0.0, 0.0, 1.0, 0.0])
+    small = Plane(level, np.arange(10), Label.FLOOR, np.arange(10), 0.05)
+    large = Plane(level, np.arange(10, 110), Label.FLOOR, np.arange(10, 110), 0.0)
+    wall = Plane(np.array([1.0, 0.0, 0.0, 0.0]), np.arange(500), Label.WALL, np.arange(500), 1.2)
+    assert main_floor((wall, small, large)) is large
+    assert main_floor((large, small)) is large
+    assert main_floor((wall,)) is None
