@@ -119,6 +119,8 @@ class RefineConfig:
     # stand on a table's top, min_cluster_points of them, become an object (tabletop.py)
     orphan_adoption: bool = True  # then a segment still 0 that the network labelled (a chair's
     # back it called floor) joins the one object class it touches, not a table (orphans.py)
+    lone_objects: bool = True  # then a segment still 0 that touches no object, of at least
+    # min_cluster_points, the network labelled one class, becomes an object of it (orphans.py)
     rejoin_strays: bool = True  # after regrowth, a point the network calls plant that SOR or
     # phase II left out, not alone, joins the plant's refined points within r1, in waves:
     # sparse foliage is no noise (outliers.py)
@@ -185,6 +187,7 @@ class RefineConfig:
             "raised_vote": False,
             "rejoin_strays": False,
             "orphan_adoption": False,
+            "lone_objects": False,
             "object_bridge_m": 0.0,
             "regrow_structure": True,
             "inside_objects_share": 0.0,

@@ -140,6 +140,7 @@ def refinement_metrics(
         "legs_relabelled": len(result.legs),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
+        "lone_objects": len(result.lone),
         "strays_rejoined": len(result.strays),
         "strays_rejoined_from_sor": int(np.isin(result.strays, result.sor_outliers).sum()),
         "final": int(result.kept.sum()),

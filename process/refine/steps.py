@@ -22,7 +22,7 @@ from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_par
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.inside import structure_inside_objects
 from process.refine.legs import legs_under_tables
-from process.refine.orphans import adopt_orphans
+from process.refine.orphans import adopt_orphans, lone_objects
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
 from process.refine.planes import PlaneSegmentation, segment_planes
@@ -98,6 +98,8 @@ class RefineResult:
     # input indices of chair clusters under a table's top made its legs (legs.py)
     floor_band: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices the network calls floor just over the floor's band that objects took
+    lone: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of unlabelled segments the network saw touching no object, made objects
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -204,7 +206,7 @@ def refine(
     labels, clusters = np.where(opened, 0, labels), np.where(opened, 0, clusters)
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
-    filled = orphans = strays_rejoined = enclosed = np.zeros(0, np.intp)
+    filled = orphans = lone = strays_rejoined = enclosed = np.zeros(0, np.intp)
     tabletop = floor_band = np.zeros(0, np.intp)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
@@ -269,6 +271,12 @@ def refine(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels
             )
             regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
+        if cfg.lone_objects:  # what the network saw apart from every object, DBSCAN dropped
+            labels_iii, clusters_iii, lone = lone_objects(
+                cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
+                min_points=cfg.min_cluster_points,
+            )  # fmt: skip
+            regrown = np.union1d(regrown, lone)  # shown with the regrown points too
         if cfg.rejoin_strays:  # sparse foliage SOR and DBSCAN took for noise, to its plant
             left = np.zeros(len(cloud), bool)
             left[objects[~keep_out]] = True  # not behind a wall, not on a bare face
@@ -322,7 +330,7 @@ def refine(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
         labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
         rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
-        strays_rejoined, enclosed, inside, legs, floor_band,
+        strays_rejoined, enclosed, inside, legs, floor_band, lone,
     )  # fmt: skip
 
 
