@@ -149,6 +149,26 @@ def test_a_sparse_cluster_inside_another_class_object_gives_way_one_on_its_own_s
     assert drop.tolist() == [2]
 
 
+def test_a_sparse_cluster_gives_way_only_to_a_cluster_at_least_its_size() -> None:
+    """A chair's seat (sparse) inside the box of a blob of plant labels spread over the chair
+    (dense at its class's wide eps, fewer points): the seat stays; a larger blob takes it."""
+    seat = grid_patch((0.0, 0.45), (0.0, 0.45), z=0.45, step=0.05)  # 81 points
+    blob = np.concatenate(  # 72 points in two layers, 5 cm below and above it
+        [grid_patch((-0.05, 0.5), (-0.05, 0.5), z=z, step=0.1) for z in (0.4, 0.5)]
+    )
+    points = np.concatenate([seat, blob]).astype(np.float32)
+    labels = np.r_[np.full(len(seat), 5), np.full(len(blob), 7)].astype(np.uint8)
+    clusters = np.r_[np.full(len(seat), 1), np.full(len(blob), 2)].astype(np.int32)
+    assert sparse_inside_others(points, labels, clusters, np.array([1])).tolist() == []
+    dense_blob = np.concatenate(  # 392 points
+        [grid_patch((-0.05, 0.5), (-0.05, 0.5), z=z, step=0.04) for z in (0.4, 0.5)]
+    )
+    points = np.concatenate([seat, dense_blob]).astype(np.float32)
+    labels = np.r_[np.full(len(seat), 5), np.full(len(dense_blob), 7)].astype(np.uint8)
+    clusters = np.r_[np.full(len(seat), 1), np.full(len(dense_blob), 2)].astype(np.int32)
+    assert sparse_inside_others(points, labels, clusters, np.array([1])).tolist() == [1]
+
+
 def test_a_sparse_object_standing_on_a_table_stays_though_specks_stretch_the_table() -> None:
     """A box on a table touches the table's box at its foot; three table specks on its top
     would stretch the table's box over it: the box is taken between percentiles 1 and 99."""
