@@ -64,15 +64,10 @@ def adopt_orphans(
         said: (N,) the network's labels (phase I, as recorded): 0 where it saw nothing.
     """
     labels, clusters = labels.copy(), clusters.copy()
-    held = np.flatnonzero(np.isin(labels, OBJECT_LABELS) & (clusters > 0))
-    rows = rows[labels[rows] == 0]
-    if len(rows) < MIN_CONTACT or len(held) < 2:
+    found = _unlabelled_segments(points, labels, clusters, rows, MIN_CONTACT)
+    if found is None:
         return labels, clusters, np.zeros(0, np.intp)
-    objects = cKDTree(np.asarray(points[held], np.float64))
-    link = LINK * point_spacing(points[held], objects)
-    xyz = np.asarray(points[rows], np.float64)
-    segment = _segments(xyz, link)
-    dist, nearest = objects.query(xyz, distance_upper_bound=link, workers=-1)
+    held, rows, segment, dist, nearest = found
     touching = np.isfinite(dist)
     adopted: list[npt.NDArray[np.intp]] = []
     for seg in np.unique(segment[touching]):
@@ -107,15 +102,10 @@ def lone_objects(
     object. Each such segment becomes a cluster of its own (ids above every id in use).
     """
     labels, clusters = labels.copy(), clusters.copy()
-    held = np.flatnonzero(np.isin(labels, OBJECT_LABELS) & (clusters > 0))
-    rows = rows[labels[rows] == 0]
-    if len(rows) < max(min_points, 1) or len(held) < 2:
+    found = _unlabelled_segments(points, labels, clusters, rows, max(min_points, 1))
+    if found is None:
         return labels, clusters, np.zeros(0, np.intp)
-    objects = cKDTree(np.asarray(points[held], np.float64))
-    link = LINK * point_spacing(points[held], objects)
-    xyz = np.asarray(points[rows], np.float64)
-    segment = _segments(xyz, link)
-    dist, _ = objects.query(xyz, distance_upper_bound=link, workers=-1)
+    _, rows, segment, dist, _ = found
     touching = np.unique(segment[np.isfinite(dist)])
     large = np.flatnonzero(np.bincount(segment) >= min_points)
     made: list[npt.NDArray[np.intp]] = []
@@ -133,6 +123,39 @@ def lone_objects(
         made.append(members)
     done = np.sort(np.concatenate(made)) if made else np.zeros(0, np.intp)
     return labels, clusters, done
+
+
+def _unlabelled_segments(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    rows: npt.NDArray[np.intp],
+    fewest: int,
+) -> (
+    tuple[
+        npt.NDArray[np.intp],
+        npt.NDArray[np.intp],
+        npt.NDArray[np.int32],
+        npt.NDArray[np.float64],
+        npt.NDArray[np.intp],
+    ]
+    | None
+):
+    """Return the unlabelled rows' segments and their nearest object points, or None.
+
+    (object points, unlabelled rows, a segment id per row, distance and index of each row's
+    nearest object point within LINK spacings: inf and len(objects) beyond); None when fewer
+    than `fewest` rows are unlabelled or there are no objects.
+    """
+    held = np.flatnonzero(np.isin(labels, OBJECT_LABELS) & (clusters > 0))
+    rows = rows[labels[rows] == 0]
+    if len(rows) < fewest or len(held) < 2:
+        return None
+    objects = cKDTree(np.asarray(points[held], np.float64))
+    link = LINK * point_spacing(points[held], objects)
+    xyz = np.asarray(points[rows], np.float64)
+    dist, nearest = objects.query(xyz, distance_upper_bound=link, workers=-1)
+    return held, rows, _segments(xyz, link), dist, nearest
 
 
 def _segments(xyz: npt.NDArray[np.float64], link: float) -> npt.NDArray[np.int32]:
