@@ -120,7 +120,8 @@ class RefineConfig:
     orphan_adoption: bool = True  # then a segment still 0 that the network labelled (a chair's
     # back it called floor) joins the one object class it touches, not a table (orphans.py)
     lone_objects: bool = True  # then a segment still 0 that touches no object, of at least
-    # min_cluster_points, the network labelled one class, becomes an object of it (orphans.py)
+    # min_cluster_points, becomes an object of the class most of its network labels give
+    # (orphans.py)
     rejoin_strays: bool = True  # after regrowth, a point the network calls plant that SOR or
     # phase II left out, not alone, joins the plant's refined points within r1, in waves:
     # sparse foliage is no noise (outliers.py)

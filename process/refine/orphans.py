@@ -41,7 +41,7 @@ from process.refine.graph import components, knn_edges, point_spacing
 
 NEIGHBOURS = 8  # graph edges per unlabelled point
 LINK = 2.5  # unlabelled points within this many point spacings are one segment
-SAID = 0.5  # share of a segment's points the network labelled (any class)
+SAID = 0.5  # share of a segment's points the network labelled (any class; lone: an object class)
 MIN_CONTACT = 10  # points of a segment within LINK spacings of an object point
 SHARE = 0.95  # of a segment's contacts touch objects of the class it takes
 
