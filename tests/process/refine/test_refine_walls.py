@@ -106,6 +106,22 @@ def test_a_wall_in_front_of_a_door_recess_is_not_an_object_on_the_door() -> None
     assert out[1].on_wall == s and out[0].on_wall == 0
 
 
+def test_a_wall_fused_twice_is_no_object_on_itself_but_a_board_on_it_is() -> None:
+    """TUM fr1_rpy: drift leaves a wall's upper part as a second layer a few cm in front."""
+    wall = _wall(0.0, (0.0, 4.0), 2.5)
+    layer = _wall(0.05, (0.0, 4.0), 2.0)
+    layer = layer[layer[:, 2] >= 0.5]  # 1.5 m of the wall's 2.5 m: not its full height
+    board = _wall(0.05, (1.0, 2.2), 1.8)
+    board = board[board[:, 2] >= 0.9]  # a whiteboard 5 cm off the wall: 1.1 of 10 m^2
+    room = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)  # the floor: the room is at y > 0
+    for front, given in ((layer, 0), (board, len(board))):
+        points = np.concatenate([wall, front, room])
+        n, f = len(wall), len(front)
+        planes = (_plane(points, np.arange(n), 0.0), _plane(points, np.arange(n, n + f), 0.05))
+        out = objects_on_walls(points, planes, RefineConfig(), points[:, 2].copy())
+        assert out[1].on_wall == given and out[0].on_wall == 0
+
+
 def test_a_wall_before_a_smaller_plane_spread_along_it_is_no_object_on_it() -> None:
     """Two narrow recesses at a wall's ends: their box spans the wall, their area does not."""
     wall = _wall(0.0, (0.3, 3.7), 2.5)
@@ -275,7 +291,7 @@ def test_regrowth_leaves_a_noisy_walls_tail_to_the_wall() -> None:
 
 
 def test_a_layer_before_a_wall_from_floor_to_top_is_the_walls_own_face() -> None:
-    """A layer 5.5 cm before a thin wall (3 mm), 3 m wide: from the floor to the wall's top it is
+    """A layer 5.5 cm before a thin wall (3 mm), 1.5 m wide: from the floor to the wall's top it is
     the wall's own face (a chimney breast's, a raw-depth wall's front layer; generator 5's
     office), 0.9 m tall at screen height it hangs on the wall. Without heights: both hang."""
     rng = np.random.default_rng(2)
@@ -283,7 +299,7 @@ def test_a_layer_before_a_wall_from_floor_to_top_is_the_walls_own_face() -> None
     wall[:, 1] += rng.normal(0.0, 0.003, len(wall))
     room = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)  # the floor: the room is at y > 0
     for top, bottom, hangs in ((2.5, 0.0, False), (2.0, 1.1, True)):
-        layer = _wall(0.055, (0.5, 3.5), top - bottom)
+        layer = _wall(0.055, (1.0, 2.5), top - bottom)  # under half the wall: not its double
         layer[:, 2] += bottom
         points = np.concatenate([wall, layer, room]).astype(np.float32)
         n, m = len(wall), len(layer)
