@@ -5,10 +5,10 @@ DBSCAN's MinPts is one density for a whole class: a mug or a box of clutter on a
 (`table_top_m`), but no object of their class is near to take them back. Here the points still
 0 that the network gave a class that stands on desks (ON_TABLES) are grouped, connected at half
 that class's r1; a group of at least `min_points` whose lowest point lies on a table object's
-top (from 3 cm below it to r1 above) and whose median lies over that table becomes a new
-cluster of its class. On fused maps of simulated recordings every such group was clutter in the
-ground truth; a wrong-class blob elsewhere (on a ceiling, a chair at desk height labelled
-table) is not on a table's top, or not of such a class, and stays 0.
+top surface (`regrowth.table_tops`; from 3 cm below it to r1 above) and whose median lies over
+that table becomes a new cluster of its class. On fused maps of simulated recordings every such
+group was clutter in the ground truth; a wrong-class blob elsewhere (on a ceiling, a chair at
+desk height labelled table) is not on a table's top, or not of such a class, and stays 0.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
-from process.refine.regrowth import frame
+from process.refine.regrowth import frame, table_tops
 
 _BELOW_TOP_M = 0.03  # a group's foot may sink this far into the top (plane noise)
 # what stands on desks; a plant- or person-labelled blob on a desk was clutter (gen-2 room 5,
@@ -78,12 +78,18 @@ def tabletop_objects(
 def _table_boxes(
     xyz: npt.NDArray[np.float64], labels: npt.NDArray[np.uint8], clusters: npt.NDArray[np.int32]
 ) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:
-    """Return (low, high) in the up frame of every table cluster."""
+    """Return (low, high) in the up frame of every table cluster, high at its top surface."""
     desk = labels == Label.TABLE
+    ids = np.unique(clusters[desk & (clusters > 0)])
+    if len(ids) == 0:
+        return []
     out = []
-    for cid in np.unique(clusters[desk & (clusters > 0)]):
+    tops = table_tops(xyz[:, 2], np.where(desk, clusters, 0), ids)
+    for cid, top in zip(ids, tops, strict=True):
         mine = xyz[desk & (clusters == cid)]
-        out.append((mine.min(axis=0), mine.max(axis=0)))
+        high = mine.max(axis=0)
+        high[2] = min(high[2], float(top))  # its surface, not labels bled onto what stands on it
+        out.append((mine.min(axis=0), high))
     return out
 
 

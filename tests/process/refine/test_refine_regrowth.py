@@ -8,7 +8,7 @@ from helpers_refine import grid_patch, labelled
 
 from capture.recording import Label
 from process.refine import RefineConfig, refine
-from process.refine.regrowth import regrow
+from process.refine.regrowth import regrow, table_tops
 
 
 def _box_surface(low: tuple[float, float, float], high: tuple[float, float, float]) -> np.ndarray:
@@ -151,6 +151,21 @@ def test_a_table_box_reaches_table_top_m_above_its_top_not_r1() -> None:
     paper = regrow(points, labels, clusters, r1_m={4: 0.1}, up=up)
     assert (paper.labels == 4).all()  # r1 (10 cm) above the top: the box became table
     assert paper.above_tables == 0
+
+
+def test_table_labels_bled_onto_a_cup_do_not_lift_the_tables_box() -> None:
+    """Table labels on a cup's rim 11 cm over the top: the box's top is the table's surface."""
+    up = np.array([0.0, 0.0, 1.0])
+    top = grid_patch((0.0, 1.0), (0.0, 0.6), z=0.75)
+    rim = grid_patch((0.1, 0.2), (0.1, 0.2), z=0.86)  # 36 points: bled table labels
+    box = np.concatenate([grid_patch((0.4, 0.6), (0.2, 0.4), z=z) for z in (0.79, 0.81)])
+    points = np.concatenate([top, rim, box])
+    labels = np.r_[np.full(len(top) + len(rim), 4), np.zeros(len(box))].astype(np.uint8)
+    clusters = np.where(labels == 4, 1, 0).astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.1}, up=up, table_top_m=0.03)
+    assert (grown.labels[-len(box) :] == 0).all()  # 4 and 6 cm over the surface: not table
+    tops = table_tops(points[:, 2], clusters, np.array([1], np.int32))
+    assert tops.tolist() == [np.float32(0.75)]
 
 
 def test_points_kept_out_stay_unlabelled_the_rest_of_the_hole_refills() -> None:

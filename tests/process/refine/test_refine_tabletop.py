@@ -40,6 +40,23 @@ def test_a_clutter_box_on_a_table_top_becomes_an_object_the_rest_stays_0() -> No
     assert (new_labels[:n] == 4).all() and (new_clusters[:n] == 7).all()
 
 
+def test_a_box_on_a_table_whose_labels_bled_onto_a_cup_is_found() -> None:
+    """Table labels on a cup's rim 11 cm over the top do not lift the top the box stands on."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.6), z=0.75)
+    rim = grid_patch((0.1, 0.2), (0.1, 0.2), z=0.86)  # in the table's cluster
+    on_top = _box(0.5, 0.2, 0.77, 3)
+    points = np.concatenate([top, rim, on_top])
+    n = len(top) + len(rim)
+    labels = np.r_[np.full(n, 4), np.zeros(len(on_top))].astype(np.uint8)
+    clusters = np.where(labels == 4, 7, 0).astype(np.int32)
+    prior = np.r_[np.full(n, 4), np.full(len(on_top), 10)].astype(np.uint8)
+    new_labels, _, found = tabletop_objects(
+        points, labels, clusters, prior, r1_m={4: 0.1, 10: 0.1}, up=UP, min_points=30, first_id=8
+    )
+    assert found.tolist() == list(range(n, len(points)))
+    assert (new_labels[n:] == 10).all()
+
+
 def test_without_a_table_nothing_is_found() -> None:
     points = _box(0.5, 0.2, 0.77, 3)
     zeros = np.zeros(len(points), np.uint8)
