@@ -35,7 +35,9 @@ _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, neare
 ON_HOST_SHARE = 0.95  # of a nested cluster's points near its host's for adoption (_adopt)
 TOUCH_SHARE = 0.2  # ... and this share within half the host's r1 of them: lying on it
 _FLOOR_PERCENTILE = 0.5  # the floor under the objects: this low a percentile of their heights
-TOP_PERCENTILE = 90.0  # a table's top surface: this percentile of its points' heights
+# a table's top surface (table_tops): its highest layer this thick holding this share of its
+# points, where that reaches this percentile of their heights
+TOP_LAYER_M, TOP_LAYER_SHARE, TOP_PERCENTILE = 0.02, 0.1, 90.0
 # classes that stand on the floor, on legs, bases and stems: their boxes reach down to it. A
 # monitor or clutter stands on a table: reaching down, it would take the table top under it.
 STANDING = (Label.TABLE, Label.CHAIR, Label.PERSON, Label.PLANT, Label.SOFA)
@@ -295,21 +297,37 @@ def _cluster_table(
 
 def table_tops(
     heights: npt.NDArray[np.floating], clusters: npt.NDArray[np.int32], ids: npt.NDArray[np.int32]
-) -> npt.NDArray[np.floating]:
+) -> npt.NDArray[np.float64]:
     """Return the top surface's height of each table cluster in `ids` (sorted, all present).
 
-    The TOP_PERCENTILE of its points' heights: a table's points lie mostly on its top, and the
-    labels it bled onto a cup or a monitor's foot standing on it lie above (a fused map of a
-    simulated recording, seed 43: table labels on a cup's rim 11 cm over the top opened two
-    cups beside it to the table's growth).
+    A table's points lie mostly on its top, and the labels it bled onto a cup or a monitor's
+    foot standing on it lie above (a fused map of a simulated recording, seed 43: table labels
+    on a cup's rim 11 cm over the top opened two cups beside it to the table's growth). Where
+    the highest TOP_LAYER_M layer holding TOP_LAYER_SHARE of the cluster's points reaches its
+    TOP_PERCENTILE (the top surface), the top is the higher of the two; a cluster with no such
+    layer up there (legs whose top the network missed, legs and a stretcher) keeps its highest
+    point.
     """
+    tops = np.empty(len(ids), np.float64)
+    if len(ids) == 0:
+        return tops
     member = np.flatnonzero(np.isin(clusters, ids))
     group = np.searchsorted(ids, clusters[member])
     order = np.lexsort((heights[member], group))
     counts = np.bincount(group, minlength=len(ids))
-    start = np.cumsum(counts) - counts
-    pick = start + np.floor(TOP_PERCENTILE / 100 * (counts - 1)).astype(np.intp)
-    tops: npt.NDArray[np.floating] = heights[member[order[pick]]]
+    for row, h in enumerate(
+        np.split(heights[member[order]].astype(np.float64), np.cumsum(counts)[:-1])
+    ):
+        tops[row] = h[-1]
+        layer = np.floor(h / TOP_LAYER_M).astype(np.int64)
+        level, n = np.unique(layer, return_counts=True)
+        dense = level[n >= TOP_LAYER_SHARE * len(h)]
+        if len(dense) == 0:
+            continue
+        surface = float(h[layer == dense.max()].max())
+        upper = float(h[int(TOP_PERCENTILE / 100 * (len(h) - 1))])
+        if surface >= upper - TOP_LAYER_M:
+            tops[row] = min(tops[row], max(surface, upper))
     return tops
 
 

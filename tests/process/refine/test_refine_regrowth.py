@@ -168,6 +168,27 @@ def test_table_labels_bled_onto_a_cup_do_not_lift_the_tables_box() -> None:
     assert tops.tolist() == [np.float32(0.75)]
 
 
+def test_a_tables_legs_without_their_top_keep_their_highest_point_as_the_top() -> None:
+    """A side table whose top the network missed: no layer of its legs is a surface, so the
+    box reaches over the legs' highest point and the top regrows (the 90th percentile of the
+    legs' heights lies 7 cm under it)."""
+    up = np.array([0.0, 0.0, 1.0])
+    legs = np.concatenate(
+        [
+            np.column_stack([np.full(37, x), np.full(37, y), np.linspace(0.0, 0.72, 37)])
+            for x in (0.0, 0.4)
+            for y in (0.0, 0.4)
+        ]
+    )
+    top = grid_patch((0.0, 0.4), (0.0, 0.4), z=0.73)
+    points = np.concatenate([legs, top]).astype(np.float32)
+    labels = np.r_[np.full(len(legs), 4), np.zeros(len(top))].astype(np.uint8)
+    clusters = np.where(labels == 4, 1, 0).astype(np.int32)
+    grown = regrow(points, labels, clusters, r1_m={4: 0.1}, up=up, table_top_m=0.03)
+    assert (grown.labels[len(legs) :] == 4).all()
+    assert table_tops(points[:, 2], clusters, np.array([1], np.int32))[0] == np.float32(0.72)
+
+
 def test_points_kept_out_stay_unlabelled_the_rest_of_the_hole_refills() -> None:
     """A table top with a missed patch: the patch's half that the network called wall stays 0."""
     top = grid_patch((0.0, 1.2), (0.0, 0.6))
