@@ -159,15 +159,12 @@ def regrow(
         stands = np.isin(table.label, STANDING)
         table.low[stands, 2] = np.minimum(table.low[stands, 2], floor)
         if table_top_m > 0:
-            desk = table.label == Label.TABLE
-            desks = np.flatnonzero(desk)
-            top = table.high[desk, 2] - table.r1[desk]  # the object's highest point ...
-            surface = np.full(table.object.max() + 1, -np.inf)  # ... or its top surface
-            np.maximum.at(
-                surface, table.object[desks], table_tops(points[:, 2], clusters, ids[desks])
+            desks = np.flatnonzero(table.label == Label.TABLE)
+            top = np.full(table.object.max() + 1, -np.inf)  # each object's top surface
+            np.maximum.at(top, table.object[desks], table_tops(points[:, 2], clusters, ids[desks]))
+            table.high[desks, 2] = top[table.object[desks]] + np.minimum(
+                table_top_m, table.r1[desks]
             )
-            top = np.minimum(top, surface[table.object[desks]])
-            table.high[desk, 2] = top + np.minimum(table_top_m, table.r1[desk])
     lookup = np.searchsorted(ids, clusters)  # row of each clustered point in the table
     grown: list[npt.NDArray[np.intp]] = []
     waves = 0
@@ -306,7 +303,7 @@ def table_tops(
     the highest TOP_LAYER_M layer holding TOP_LAYER_SHARE of the cluster's points reaches its
     TOP_PERCENTILE (the top surface), the top is the higher of the two; a cluster with no such
     layer up there (legs whose top the network missed, legs and a stretcher) keeps its highest
-    point.
+    point. Never above the cluster's highest point.
     """
     tops = np.empty(len(ids), np.float64)
     if len(ids) == 0:

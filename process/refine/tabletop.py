@@ -88,7 +88,7 @@ def _table_boxes(
     for cid, top in zip(ids, tops, strict=True):
         mine = xyz[desk & (clusters == cid)]
         high = mine.max(axis=0)
-        high[2] = min(high[2], float(top))  # its surface, not labels bled onto what stands on it
+        high[2] = top  # its surface, not labels bled onto what stands on it
         out.append((mine.min(axis=0), high))
     return out
 
