@@ -8,14 +8,24 @@ does not stand in a table's footprint reaching exactly up to its top: a chair pu
 table leaves its back outside or rises above the top, a stool stays well under it. A chair
 cluster is a leg of the table when
 - `INSIDE` of its points lie over the top's footprint (its `CELL_M` cells and their neighbours),
-- none rises above the top's band, and its highest reaches within `REACH_M` of the top or it
-  touches the table (the lower part of a leg whose upper part the network called table),
-- it reaches down to within `FLOOR_M` of the floor plane, and
+- none rises above the top's band,
 - it is thin in plan, as a leg is: its points spread at most `THIN_M` (one standard deviation)
   in every direction (the recordings' legs 2-6 cm; a chair's seat 10-17 cm: on generators 2
   and 3 whole chairs pushed under desks, their backs below the top, were taken for legs, and
-  one whose seat the network missed, a back 16 cm and 4 cm across), and
-- it is smaller than the table cluster holding the top.
+  one whose seat the network missed, a back 16 cm and 4 cm across),
+- it is smaller than the table cluster holding the top, and
+- it spans the leg's height as a leg or a leg's piece does, one of:
+  - its highest reaches within `REACH_M` of the top or it touches the table (the lower part of
+    a leg whose upper part the network called table), and its lowest within `RAISED_M` of the
+    floor plane (a leg whose foot the network missed, or the floor plane's band took: fresh
+    recordings 39 and 45, 169-175 points from 17-22 cm up to the top);
+  - it stands on the floor (lowest within `FLOOR_M`) as a prism, no 5 cm slice of it wider
+    than `PRISM` times its median slice (a post, not a stool's seat on its column), with
+    nothing of another object class above it under the top within `ABOVE_M` of its plan
+    (fewer than `ABOVE_SHARE` of its points): a leg's lower piece whose upper part the network
+    called wall or nothing (fresh recordings 10, 15, 41: 122-413 points up to 29-58 cm), not a
+    chair's leg or a swivel chair's column, which stand under a seat or a seated person
+    (generator 3: eight chairs' columns and legs under desks were taken without that test).
 It then takes the table's label and object. Written here because no library relabels by such a
 footprint test; the footprint grid is the raised vote's (`plane_grid`).
 """
@@ -26,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from capture.recording import Label
+from capture.recording import OBJECT_LABELS, Label
 from process.refine.graph import point_spacing
 from process.refine.plane_grid import over_footprint, plane_uv
 
@@ -35,6 +45,11 @@ INSIDE = 0.9  # share of a cluster's points over the footprint
 BAND_M = 0.03  # nothing of it higher than this above the top's upper face
 REACH_M = 0.1  # ... and its highest point at most this far under it
 FLOOR_M = 0.15  # its lowest point at most this far above the floor
+RAISED_M = 0.3  # ... or this far, when it reaches the top
+PRISM = 2.0  # a standing piece that does not reach the top: widest slice / median slice
+SLICE_M = 0.05  # ... of this height
+ABOVE_M = 0.1  # ... and nothing of another object above it within this of its plan
+ABOVE_SHARE = 0.1  # ... as many points as this share of its own
 LINK = 2.5  # a lower piece of a leg touches the table: a point within this many point spacings
 THIN_M = 0.08  # a leg is thin: the spread of its points in plan along their widest direction
 
@@ -44,6 +59,19 @@ def _spread(uv: npt.NDArray[np.float32]) -> float:
     if len(uv) < 3:
         return 0.0
     return float(np.sqrt(max(np.linalg.eigvalsh(np.cov(np.asarray(uv, np.float64).T))[-1], 0.0)))
+
+
+def _prism(heights: npt.NDArray[np.float32], uv: npt.NDArray[np.float32]) -> bool:
+    """Return whether the piece is a post: no SLICE_M slice of it much wider than the median.
+
+    Fewer than three slices of five points or more: no (too short to tell).
+    """
+    widths = []
+    for low in np.arange(float(heights.min()), float(heights.max()), SLICE_M):
+        in_slice = (heights >= low) & (heights < low + SLICE_M)
+        if in_slice.sum() >= 5:
+            widths.append(_spread(uv[in_slice]))
+    return len(widths) >= 3 and max(widths) <= PRISM * float(np.median(widths))
 
 
 def _touches(xyz: npt.NDArray[np.float32], tree: cKDTree, link: float) -> bool:
@@ -84,7 +112,7 @@ def legs_under_tables(
         offset = pts @ model[:3].astype(np.float32) + np.float32(model[3])
         top = float(np.percentile(offset[surface], 75))  # its upper face (raised.py's reading)
         highest = np.maximum.reduceat(offset[chair], starts)
-        candidates = np.flatnonzero(~taken & (highest <= top + BAND_M) & (lowest <= FLOOR_M))
+        candidates = np.flatnonzero(~taken & (highest <= top + BAND_M) & (lowest <= RAISED_M))
         table = out_clusters[surface][out_labels[surface] == Label.TABLE]
         table = table[table > 0]
         if len(candidates) == 0 or len(table) == 0:
@@ -94,15 +122,30 @@ def legs_under_tables(
         host_tree = cKDTree(host_points)
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
+        others = np.flatnonzero(
+            np.isin(out_labels, OBJECT_LABELS) & (out_labels != Label.TABLE) & (offset < top)
+        )
+        uv_others = plane_uv(pts[others], model)
         for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
-            if highest[k] < top - REACH_M and not _touches(pts[members], host_tree, link):
-                continue
             uv = plane_uv(pts[members], model)
             if _spread(uv) > THIN_M:  # a seat: a chair pushed right under the table
                 continue
             if over_footprint(uv_top, uv, CELL_M, diagonal=True).mean() < INSIDE:
                 continue
+            reaches = highest[k] >= top - REACH_M or _touches(pts[members], host_tree, link)
+            if not reaches:
+                if lowest[k] > FLOOR_M or not _prism(above_floor[members], uv):
+                    continue
+                near = np.all(
+                    (uv_others >= uv.min(axis=0) - ABOVE_M)
+                    & (uv_others <= uv.max(axis=0) + ABOVE_M),
+                    axis=1,
+                )
+                above = near & (offset[others] > highest[k]) & (out_labels[others] != Label.TABLE)
+                above &= out_clusters[others] != out_clusters[members[0]]
+                if above.sum() >= ABOVE_SHARE * len(members):  # a seat or a sitter on it
+                    continue
             out_labels[members], out_clusters[members] = Label.TABLE, host
             changed.append(members)
             taken[k] = True

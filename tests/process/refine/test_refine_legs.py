@@ -89,15 +89,68 @@ def test_legs_called_chair_become_the_table_chairs_under_it_stay() -> None:
 
 
 def test_a_leg_standing_clear_of_the_floor_is_no_leg() -> None:
-    """What hangs under a top without reaching the floor (a drawer unit the network called
-    chair) is left: a leg stands on the floor."""
+    """What hangs under a top ending more than RAISED_M over the floor (a drawer unit the
+    network called chair) is left: a leg stands on the floor."""
     points, labels, clusters, where = _scene()
     surface = np.arange(where["top"].start, where["top"].stop)
     lifted = points.copy()
-    lifted[where["leg_a"], 2] = np.clip(lifted[where["leg_a"], 2], 0.3, None)
+    lifted[where["leg_a"], 2] = np.clip(lifted[where["leg_a"], 2], 0.35, None)
     out, _, _ = legs_under_tables(lifted, labels, clusters, [(TOP, surface)], FLOOR, UP)
     assert (out[where["leg_a"]] == CHAIR).all()
     assert (out[where["leg_b_low"]] == TABLE).all()
+
+
+def _pieces_scene() -> tuple[
+    Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], dict[str, slice]
+]:
+    """The 1.2 x 0.8 m top at 73 cm (cluster 1) over: a leg the network called chair from 20 cm
+    up to the top, its foot missed (2); a leg's lower 40 cm called chair, its upper part
+    unlabelled (3, the upper part in no cluster); a chair's leg under its seat (4, the seat 5);
+    and a swivel chair's column under a seated person (6, the person 7)."""
+    top = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.73, step=0.01)
+    seat = grid_patch((0.5, 0.9), (0.2, 0.6), z=0.45, step=0.01)
+    person = grid_patch((0.15, 0.45), (0.3, 0.6), z=0.5, step=0.01)
+    parts = {
+        "top": (top, TABLE, 1),
+        "footless": (_column(0.02, 0.02, (0.2, 0.72)), CHAIR, 2),
+        "lower": (_column(1.14, 0.74, (0.0, 0.4)), CHAIR, 3),
+        "upper": (_column(1.14, 0.74, (0.4, 0.72)), Label.UNLABELLED, 0),
+        "chair_leg": (_column(0.52, 0.22, (0.0, 0.44)), CHAIR, 4),
+        "seat": (seat, CHAIR, 5),
+        "column": (_column(0.28, 0.43, (0.0, 0.44)), CHAIR, 6),
+        "person": (person, Label.PERSON, 7),
+    }
+    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
+    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
+    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
+    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
+    where = {
+        name: slice(int(e - len(p)), int(e))
+        for (name, (p, _, _)), e in zip(parts.items(), ends, strict=True)
+    }
+    return points, labels, clusters, where
+
+
+def test_leg_pieces_become_the_table_legs_under_a_seat_stay() -> None:
+    """A leg whose foot the network missed (reaching the top, from 20 cm up) and a leg's lower
+    piece standing on the floor (a post, nothing above it but the top) are the table's; a
+    chair's leg under its seat and a column under a seated person stand as posts on the floor
+    too, but under something of another object: they stay chairs."""
+    points, labels, clusters, where = _pieces_scene()
+    surface = np.arange(where["top"].start, where["top"].stop)
+    out, ids, _ = legs_under_tables(points, labels, clusters, [(TOP, surface)], FLOOR, UP)
+    for leg in ("footless", "lower"):
+        assert (out[where[leg]] == TABLE).all() and (ids[where[leg]] == 1).all(), leg
+    for name in ("chair_leg", "seat", "column"):
+        assert (out[where[name]] == CHAIR).all(), name
+    assert (out[where["upper"]] == Label.UNLABELLED).all()
+    # a stool's seat on its column is no post: the same piece with a 25 cm seat on it stays
+    stool = np.concatenate([points, grid_patch((1.0, 1.2), (0.55, 0.8), z=0.4, step=0.01)])
+    stool_labels = np.r_[labels, np.full(len(stool) - len(points), CHAIR, np.uint8)]
+    stool_ids = np.r_[clusters, np.full(len(stool) - len(points), 3, np.int32)]
+    stool[where["upper"], 2] += 1.0  # the leg's upper part out of the way
+    out, _, _ = legs_under_tables(stool, stool_labels, stool_ids, [(TOP, surface)], FLOOR, UP)
+    assert (out[where["lower"]] == CHAIR).all()
 
 
 def test_the_refinement_gives_a_leg_called_chair_to_its_table() -> None:
