@@ -141,6 +141,8 @@ class RefineConfig:
     # (ceiling, floor, wall) that DBSCAN set to 0 into objects (the paper: any 0 point grows)
     table_legs: bool = True  # chair clusters under a table's top, floor to top, are its legs
     # (legs.py)
+    chair_seats: bool = True  # a low, level, seat-sized table cluster touching a chair is its
+    # seat (legs.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
     # neighbours are at least this share objects is opened to regrowth (inside.py; 0: never)
     inside_objects_link: float = 3.0  # ... neighbours within this many object point spacings
@@ -193,6 +195,7 @@ class RefineConfig:
             "regrow_structure": True,
             "inside_objects_share": 0.0,
             "table_legs": False,
+            "chair_seats": False,
         }
         return cls(**{**paper, **overrides})
 

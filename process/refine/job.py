@@ -138,6 +138,7 @@ def refinement_metrics(
         "piece_relabelled": len(result.pieces),
         "raised_relabelled": len(result.raised),
         "legs_relabelled": len(result.legs),
+        "seats_relabelled": len(result.seats),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
         "lone_objects": len(result.lone),

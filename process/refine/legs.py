@@ -1,4 +1,6 @@
-"""A table's legs the network called chair: chair clusters under a top, from the floor to it.
+"""A table's legs the network called chair, and a chair's seat it called table.
+
+Legs: chair clusters under a top, from the floor to it.
 
 On fused maps of simulated recordings the network labels a table's legs and side panels chair
 in whole segments (fresh seed 10: 1,036 table points in four clusters of 140-400 points, each a
@@ -28,6 +30,13 @@ cluster is a leg of the table when
     (generator 3: eight chairs' columns and legs under desks were taken without that test).
 It then takes the table's label and object. Written here because no library relabels by such a
 footprint test; the footprint grid is the raised vote's (`plane_grid`).
+
+Seats (`seats_called_table`): a table cluster that is a level sheet (at most `SHEET_M` thick)
+no higher than `SEAT_M` over the floor plane and at most `SEAT_MAX_M` across, touching a chair
+(`MIN_CONTACT` points within `LINK` chair point spacings), is that chair's seat: a table's top
+stands higher, and a low table is larger or stands apart (fresh recordings 36 and 41: a seat of
+545 points the network called table whole beside its chair's back, and a piece of one of 80;
+no table of the suite's 58 clouds, the 24 fresh recordings or 50 fresh generator clouds is one).
 """
 
 from __future__ import annotations
@@ -50,6 +59,10 @@ PRISM = 2.0  # a standing piece that does not reach the top: widest slice / medi
 SLICE_M = 0.05  # ... of this height
 ABOVE_M = 0.1  # ... and nothing of another object above it within this of its plan
 ABOVE_SHARE = 0.1  # ... as many points as this share of its own
+SEAT_M = 0.55  # a table cluster no higher than this over the floor ...
+SHEET_M = 0.08  # ... and at most this thick ...
+SEAT_MAX_M = 0.8  # ... and this across (its plan's diagonal) ...
+MIN_CONTACT = 10  # ... with this many points touching a chair is the chair's seat
 LINK = 2.5  # a lower piece of a leg touches the table: a point within this many point spacings
 THIN_M = 0.08  # a leg is thin: the spread of its points in plan along their widest direction
 
@@ -151,3 +164,48 @@ def legs_under_tables(
             taken[k] = True
     relabelled = np.unique(np.concatenate(changed)) if changed else np.zeros(0, np.intp)
     return out_labels, out_clusters, relabelled
+
+
+def seats_called_table(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    floor: npt.NDArray[np.float64] | None,
+    up: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
+    """Return (labels, clusters, relabelled indices) with chairs' seats labelled table made chair.
+
+    `floor`: the floor plane (None: no rule). The seat joins the chair object it touches most.
+    """
+    out_labels, out_clusters = labels.copy(), clusters.copy()
+    none = np.zeros(0, np.intp)
+    chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
+    tables = np.flatnonzero((labels == Label.TABLE) & (clusters > 0))
+    if floor is None or len(chair) < 2 or len(tables) == 0:
+        return out_labels, out_clusters, none
+    pts = np.asarray(points, np.float32)
+    floor = floor if float(floor[:3] @ up) >= 0 else -floor
+    height = pts @ floor[:3].astype(np.float32) + np.float32(floor[3])
+    low = tables[height[tables] <= SEAT_M]
+    seats = np.unique(clusters[low])
+    if len(seats) == 0:
+        return out_labels, out_clusters, none
+    chair_tree = cKDTree(pts[chair])
+    link = LINK * point_spacing(pts[chair], chair_tree)
+    changed = []
+    for seat in seats:
+        members = tables[clusters[tables] == seat]
+        h = height[members]
+        if h.max() > SEAT_M or h.max() - h.min() > SHEET_M:
+            continue
+        uv = plane_uv(pts[members], floor)
+        if np.linalg.norm(uv.max(axis=0) - uv.min(axis=0)) > SEAT_MAX_M:
+            continue
+        dist, nearest = chair_tree.query(pts[members], distance_upper_bound=link)
+        touching = nearest[np.isfinite(dist)]
+        if len(touching) < MIN_CONTACT:
+            continue
+        ids, counts = np.unique(clusters[chair[touching]], return_counts=True)
+        out_labels[members], out_clusters[members] = Label.CHAIR, ids[np.argmax(counts)]
+        changed.append(members)
+    return out_labels, out_clusters, np.sort(np.concatenate(changed)) if changed else none

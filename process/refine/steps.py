@@ -21,7 +21,7 @@ from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.inside import structure_inside_objects
-from process.refine.legs import legs_under_tables
+from process.refine.legs import legs_under_tables, seats_called_table
 from process.refine.orphans import adopt_orphans, lone_objects
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
@@ -100,6 +100,8 @@ class RefineResult:
     # input indices the network calls floor just over the floor's band that objects took
     lone: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of unlabelled segments the network saw touching no object, made objects
+    seats: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of low, level table clusters touching a chair made its seat (legs.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -147,9 +149,10 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points the seam, piece, raised and legs votes relabelled, with their class."""
+        """Return the points the seam, piece, raised, legs and seats votes relabelled, by class."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
+        votes = np.union1d(votes, self.seats)
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -294,19 +297,26 @@ def refine(
         floor_band = objects[low & np.isin(labels_iii[objects], OBJECT_LABELS)]
     lap("regrowth")
     raised, sunk, legs = np.zeros(0, np.intp), 0, np.zeros(0, np.intp)
+    seats = np.zeros(0, np.intp)
     tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
     if cfg.raised_vote and planes.up is not None:
         lifted = raised_off_tables(cloud.points, labels_iii, clusters_iii, tops, planes.up)
         labels_iii, clusters_iii, raised = lifted.labels, lifted.clusters, lifted.relabelled
         sunk = lifted.sunk
         lap("raised")
+    floor = main_floor(planes.planes)
     if cfg.table_legs and planes.up is not None:
-        floor = main_floor(planes.planes)
         labels_iii, clusters_iii, legs = legs_under_tables(
             cloud.points, labels_iii, clusters_iii, tops, None if floor is None else floor.model,
             planes.up,
         )  # fmt: skip
         lap("legs")
+    if cfg.chair_seats and planes.up is not None:
+        labels_iii, clusters_iii, seats = seats_called_table(
+            cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
+            planes.up,
+        )  # fmt: skip
+        lap("seats")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -328,9 +338,12 @@ def refine(
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
         cloud, planes, outliers, cfg.dbscan_method, per_class, shared,
-        labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2, seconds, adopted, above,
-        rejoined, tabletop, n_behind, seams, n_faces, filled, pieces, orphans, raised, sunk,
-        strays_rejoined, enclosed, inside, legs, floor_band, lone,
+        labels_ii, clusters_ii, labels_iii, clusters_iii, regrown, r2_m=r2, seconds=seconds,
+        adopted=adopted, above_tables=above, rejoined=rejoined, tabletop=tabletop,
+        behind_walls=n_behind, seams=seams, bare_faces=n_faces, faces_filled=filled,
+        pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
+        enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
+        seats=seats,
     )  # fmt: skip
 
 

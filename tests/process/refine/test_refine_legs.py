@@ -11,7 +11,7 @@ from helpers_refine import grid_patch, labelled
 from capture.recording import Label
 from process.refine import RefineConfig, refine
 from process.refine.job import refinement_metrics
-from process.refine.legs import legs_under_tables
+from process.refine.legs import legs_under_tables, seats_called_table
 
 TABLE, CHAIR = Label.TABLE, Label.CHAIR
 UP = np.array([0.0, 0.0, 1.0])
@@ -176,3 +176,34 @@ def test_the_refinement_gives_a_leg_called_chair_to_its_table() -> None:
     assert refinement_metrics(result, gt_cloud=None)["points"]["legs_relabelled"] == len(off_floor)
     off = refine(cloud, dataclasses.replace(cfg, table_legs=False), up=UP)
     assert (off.labels_iii[off_floor] == CHAIR).all()
+
+
+def test_a_seat_called_table_becomes_its_chair_low_tables_and_tops_stay() -> None:
+    """A 45 x 45 cm level sheet at 45 cm, labelled table, beside a chair's back is the chair's
+    seat; a 1 x 0.5 m coffee table at 42 cm touching an armchair, a 60 x 45 cm desk's top at
+    73 cm touching a chair's back, and a seat-sized table at 45 cm touching nothing stay tables."""
+    back = grid_patch((0.0, 0.45), (0.46, 0.9), step=0.01)[:, [0, 2, 1]]  # upright at y = 0
+    parts = {
+        "seat": (grid_patch((0.0, 0.45), (0.01, 0.46), z=0.45, step=0.01), TABLE, 1),
+        "back": (back, CHAIR, 2),
+        "coffee": (grid_patch((2.0, 3.0), (0.0, 0.5), z=0.42, step=0.01), TABLE, 3),
+        "armchair": (grid_patch((3.01, 3.6), (0.0, 0.5), z=0.42, step=0.01), CHAIR, 4),
+        "desk": (grid_patch((5.0, 5.6), (0.0, 0.45), z=0.73, step=0.01), TABLE, 5),
+        "desk_chair": (back + np.array([5.1, 0.46, 0.0]), CHAIR, 6),
+        "side": (grid_patch((8.0, 8.45), (0.0, 0.45), z=0.45, step=0.01), TABLE, 7),
+    }
+    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
+    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
+    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
+    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
+    where = {
+        n: slice(int(e - len(p[0])), int(e)) for (n, p), e in zip(parts.items(), ends, strict=True)
+    }
+    out, ids, changed = seats_called_table(points, labels, clusters, FLOOR, UP)
+    assert (out[where["seat"]] == CHAIR).all() and (ids[where["seat"]] == 2).all()
+    assert np.array_equal(changed, np.arange(where["seat"].start, where["seat"].stop))
+    for name in ("coffee", "desk", "side"):
+        assert (out[where[name]] == TABLE).all(), name
+    assert (labels[where["seat"]] == TABLE).all()  # the input is not changed in place
+    _, _, changed = seats_called_table(points, labels, clusters, None, UP)  # no floor: no rule
+    assert len(changed) == 0
