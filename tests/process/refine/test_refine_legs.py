@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -21,6 +23,22 @@ TOP = np.array([0.0, 0.0, 1.0, -0.73])
 Points = npt.NDArray[np.float32]
 
 
+Scene = tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], dict[str, slice]]
+
+
+def _assemble(parts: Mapping[str, tuple[npt.NDArray[Any], int, int]]) -> Scene:
+    """Return (points, labels, clusters, where) of named parts, each (points, label, cluster)."""
+    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
+    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
+    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
+    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
+    where = {
+        name: slice(int(e - len(p)), int(e))
+        for (name, (p, _, _)), e in zip(parts.items(), ends, strict=True)
+    }
+    return points, labels, clusters, where
+
+
 def _column(x: float, y: float, z: tuple[float, float]) -> Points:
     """A 4 x 4 cm leg from z[0] to z[1], its faces at 1 cm spacing."""
     heights = np.arange(z[0], z[1], 0.01)
@@ -29,7 +47,7 @@ def _column(x: float, y: float, z: tuple[float, float]) -> Points:
     return np.array([(x + dx, y + dy, h) for h in heights for dx, dy in ring], np.float32)
 
 
-def _scene() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], dict[str, slice]]:
+def _scene() -> Scene:
     """A 1.2 x 0.8 m table top at 73 cm, cluster 1; one leg the network called chair whole
     (cluster 2), one chair below and table above its middle (cluster 3); a chair pushed half
     under the table whose back rises above the top (4), a stool under it (5), touching nothing
@@ -60,15 +78,7 @@ def _scene() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], dict
         "stool": (stool, CHAIR, 5),
         "tucked": (tucked, CHAIR, 6),
     }
-    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
-    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
-    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
-    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
-    where = {
-        name: slice(int(e - len(p)), int(e))
-        for (name, (p, _, _)), e in zip(parts.items(), ends, strict=True)
-    }
-    return points, labels, clusters, where
+    return _assemble(parts)
 
 
 def test_legs_called_chair_become_the_table_chairs_under_it_stay() -> None:
@@ -100,9 +110,7 @@ def test_a_leg_standing_clear_of_the_floor_is_no_leg() -> None:
     assert (out[where["leg_b_low"]] == TABLE).all()
 
 
-def _pieces_scene() -> tuple[
-    Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], dict[str, slice]
-]:
+def _pieces_scene() -> Scene:
     """The 1.2 x 0.8 m top at 73 cm (cluster 1) over: a leg the network called chair from 20 cm
     up to the top, its foot missed (2); a leg's lower 40 cm called chair, its upper part
     unlabelled (3, the upper part in no cluster); a chair's leg under its seat (4, the seat 5);
@@ -120,15 +128,7 @@ def _pieces_scene() -> tuple[
         "column": (_column(0.28, 0.43, (0.0, 0.44)), CHAIR, 6),
         "person": (person, Label.PERSON, 7),
     }
-    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
-    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
-    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
-    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
-    where = {
-        name: slice(int(e - len(p)), int(e))
-        for (name, (p, _, _)), e in zip(parts.items(), ends, strict=True)
-    }
-    return points, labels, clusters, where
+    return _assemble(parts)
 
 
 def test_leg_pieces_become_the_table_legs_under_a_seat_stay() -> None:
@@ -192,13 +192,7 @@ def test_a_seat_called_table_becomes_its_chair_low_tables_and_tops_stay() -> Non
         "desk_chair": (back + np.array([5.1, 0.46, 0.0]), CHAIR, 6),
         "side": (grid_patch((8.0, 8.45), (0.0, 0.45), z=0.45, step=0.01), TABLE, 7),
     }
-    points = np.concatenate([p for p, _, _ in parts.values()]).astype(np.float32)
-    labels = np.concatenate([np.full(len(p), lab, np.uint8) for p, lab, _ in parts.values()])
-    clusters = np.concatenate([np.full(len(p), c, np.int32) for p, _, c in parts.values()])
-    ends = np.cumsum([len(p) for p, _, _ in parts.values()])
-    where = {
-        n: slice(int(e - len(p[0])), int(e)) for (n, p), e in zip(parts.items(), ends, strict=True)
-    }
+    points, labels, clusters, where = _assemble(parts)
     out, ids, changed = seats_called_table(points, labels, clusters, FLOOR, UP)
     assert (out[where["seat"]] == CHAIR).all() and (ids[where["seat"]] == 2).all()
     assert np.array_equal(changed, np.arange(where["seat"].start, where["seat"].stop))
