@@ -135,10 +135,7 @@ def legs_under_tables(
         host_tree = cKDTree(host_points)
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
-        others = np.flatnonzero(
-            np.isin(out_labels, OBJECT_LABELS) & (out_labels != Label.TABLE) & (offset < top)
-        )
-        uv_others = plane_uv(pts[others], model)
+        others: npt.NDArray[np.intp] | None = None  # other objects under the top, when asked
         for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
             uv = plane_uv(pts[members], model)
@@ -150,6 +147,13 @@ def legs_under_tables(
             if not reaches:
                 if lowest[k] > FLOOR_M or not _prism(above_floor[members], uv):
                     continue
+                if others is None:
+                    others = np.flatnonzero(
+                        np.isin(out_labels, OBJECT_LABELS)
+                        & (out_labels != Label.TABLE)
+                        & (offset < top)
+                    )
+                    uv_others = plane_uv(pts[others], model)
                 near = np.all(
                     (uv_others >= uv.min(axis=0) - ABOVE_M)
                     & (uv_others <= uv.max(axis=0) + ABOVE_M),
@@ -185,17 +189,16 @@ def seats_called_table(
         return out_labels, out_clusters, none
     pts = np.asarray(points, np.float32)
     floor = floor if float(floor[:3] @ up) >= 0 else -floor
-    height = pts @ floor[:3].astype(np.float32) + np.float32(floor[3])
-    low = tables[height[tables] <= SEAT_M]
-    seats = np.unique(clusters[low])
+    height = pts[tables] @ floor[:3].astype(np.float32) + np.float32(floor[3])  # per table point
+    seats = np.unique(clusters[tables[height <= SEAT_M]])
     if len(seats) == 0:
         return out_labels, out_clusters, none
     chair_tree = cKDTree(pts[chair])
     link = LINK * point_spacing(pts[chair], chair_tree)
     changed = []
     for seat in seats:
-        members = tables[clusters[tables] == seat]
-        h = height[members]
+        mine = clusters[tables] == seat
+        members, h = tables[mine], height[mine]
         if h.max() > SEAT_M or h.max() - h.min() > SHEET_M:
             continue
         uv = plane_uv(pts[members], floor)

@@ -201,3 +201,31 @@ def test_a_seat_called_table_becomes_its_chair_low_tables_and_tops_stay() -> Non
     assert (labels[where["seat"]] == TABLE).all()  # the input is not changed in place
     _, _, changed = seats_called_table(points, labels, clusters, None, UP)  # no floor: no rule
     assert len(changed) == 0
+
+
+def test_the_refinement_gives_a_seat_called_table_to_its_chair() -> None:
+    """The whole refinement on a floor and a chair whose seat the network called table: DBSCAN
+    keeps the seat as a table, only the seat rule gives it to the chair (counted in
+    metrics.json, shown with the votes); without the rule (as in `paper()`) it stays a table."""
+    seat = grid_patch((0.0, 0.45), (0.01, 0.46), z=0.45, step=0.01)
+    back = grid_patch((0.0, 0.45), (0.46, 0.9), step=0.01)[:, [0, 2, 1]]
+    corners = ((0.0, 0.01), (0.42, 0.01), (0.0, 0.43), (0.42, 0.43))
+    legs = [_column(x, y, (0.0, 0.44)) for x, y in corners]
+    floor = grid_patch((-1.5, 2.0), (-1.5, 2.0), step=0.02)
+    points = np.concatenate([seat, back, *legs, floor])
+    sizes = [len(seat), len(back) + sum(len(leg) for leg in legs), len(floor)]
+    labels = np.repeat(np.array([TABLE, CHAIR, Label.FLOOR], np.uint8), sizes)
+    noise = np.random.default_rng(0).normal(0.0, 0.002, points.shape).astype(np.float32)
+    cloud = labelled(points + noise, labels)
+    on_seat = np.arange(sizes[0])
+    result = refine(cloud, RefineConfig(), up=UP)
+    kept = on_seat[result.labels_ii[on_seat] == TABLE]  # DBSCAN keeps it a table ...
+    assert len(kept) >= 0.95 * len(on_seat)
+    assert (result.labels_iii[kept] == CHAIR).all()  # ... the seat rule makes it the chair's
+    assert np.array_equal(result.seats, kept)
+    assert refinement_metrics(result, gt_cloud=None)["points"]["seats_relabelled"] == len(kept)
+    shown = {tuple(p) for p in result.seam_cloud().points.tolist()}  # the .rrd's votes entity
+    assert {tuple(p) for p in cloud.points[kept].tolist()} <= shown
+    off = refine(cloud, dataclasses.replace(RefineConfig(), chair_seats=False), up=UP)
+    assert (off.labels_iii[kept] == TABLE).all() and len(off.seats) == 0
+    assert not RefineConfig.paper().chair_seats
