@@ -46,6 +46,9 @@ class RefineConfig:
     wall_noise_sigmas: float = 4.0  # a noisy wall takes in the points, off all planes, that the
     # network calls no object, this many robust std of its own from it (at most three
     # plane_distance_m), where that is past plane_distance_m; 0: RANSAC's band (walls.py)
+    walls_behind_objects: bool = True  # a thin wall takes in the points on its own surface
+    # (refitted on its bare points) behind an object standing before it, which the network's
+    # label bleeds onto and the plane step had kept with the object's wide region (walls.py)
     floor_label_max_m: float = 0.1  # "floor" this far above the floor plane is unlabelled
     # (walls.py; 0: the network's floor labels stand wherever they are)
     floor_band_regrows: bool = True  # "floor" off the planes, past plane_distance_m and up to
@@ -178,6 +181,7 @@ class RefineConfig:
             "plane_local_hypotheses": 0,
             "structure_band_sigmas": 0.0,
             "wall_noise_sigmas": 0.0,
+            "walls_behind_objects": False,
             "floor_label_max_m": 0.0,
             "floor_band_regrows": False,
             "table_surfaces": False,

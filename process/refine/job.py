@@ -104,6 +104,7 @@ def refinement_metrics(
             "in_front_of_wall": p.on_wall,
             "beyond_band": p.off_band,
             "noise_taken_in": p.noise_taken,
+            "behind_objects_taken_in": p.behind_taken,
             "note": p.note,
         }
         for p in result.planes.planes

@@ -25,6 +25,7 @@ from process.refine.walls import (
     furniture_fronts,
     objects_on_walls,
     tighten_bands,
+    walls_behind_objects,
     widen_bands,
 )
 
@@ -49,6 +50,7 @@ class Plane:
     on_wall: int = 0  # inliers in front of a parallel wall behind, given back (walls.py)
     off_band: int = 0  # inliers beyond the plane's own noise band, given back (walls.py)
     noise_taken: int = 0  # points of a noisy wall beyond RANSAC's band, taken in (walls.py)
+    behind_taken: int = 0  # points of a wall's surface behind standing objects, taken in
     note: str = ""  # why a level plane that is not structural is (not) a table surface
     top: npt.NDArray[np.intp] | None = None  # a table surface's points, whatever their labels
 
@@ -123,6 +125,7 @@ def segment_planes(
     planes = planes[: cfg.max_planes] + tuple(p for p in planes[cfg.max_planes :] if p.label)
     planes = furniture_fronts(points, heights, planes, cfg)
     planes = tighten_bands(points, objects_on_walls(points, planes, cfg, heights), cfg)
+    planes = walls_behind_objects(points, planes, labels, cfg)
     planes = widen_bands(points, planes, labels, cfg)
     planes, table = table_surfaces(points, planes, up_used, labels, cfg, density)
     structure = np.zeros(len(points), np.uint8)

@@ -12,6 +12,7 @@ from helpers_refine import grid_patch
 from benchmarks.generator3 import gen3_scene
 from benchmarks.generator5 import sized_scene
 from capture.recording import Label
+from process.cloud import LabelledCloud
 from process.refine import RefineConfig, refine
 from process.refine.job import refinement_metrics
 from process.refine.plane_grid import wide_object_regions
@@ -22,6 +23,7 @@ from process.refine.walls import (
     furniture_fronts,
     main_floor,
     objects_on_walls,
+    walls_behind_objects,
     widen_bands,
 )
 
@@ -141,7 +143,8 @@ def test_regrowth_leaves_a_door_recess_behind_a_wall_alone() -> None:
     kept_out = refine(scene.cloud, RefineConfig(), up=scene.up)
     crossed = refine(scene.cloud, RefineConfig(wall_keep_out_m=0.0), up=scene.up)
     assert (kept_out.labels_iii[recess] >= Label.TABLE).sum() < 50  # 14
-    assert (crossed.labels_iii[recess] >= Label.TABLE).sum() > 400  # 815 regrown as objects
+    # 279 regrown as objects; 815 before the wall took in its surface behind the desk
+    assert (crossed.labels_iii[recess] >= Label.TABLE).sum() > 200
     assert kept_out.behind_walls > 3000 and crossed.behind_walls == 0
     section = refinement_metrics(kept_out, gt_cloud=None)
     assert section["points"]["behind_walls_left_out"] == kept_out.behind_walls
@@ -319,3 +322,91 @@ def test_main_floor_is_the_floor_plane_with_the_most_points_of_its_own() -> None
     assert main_floor((wall, small, large)) is large
     assert main_floor((large, small)) is large
     assert main_floor((wall,)) is None
+
+
+def _sofa_at_a_wall(
+    sigma: float, gap: float = 0.02
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """A wall at y = 0 (noise `sigma`), a sofa's back `gap` before it, a screen hung on it.
+
+    The network's sofa label bleeds 5 cm onto the wall behind the sofa; the screen's back lies
+    5 mm off the wall, its front 5.5 cm, all of it labelled screen (uniformly sampled meshes
+    show both back faces, as generator 4's do)."""
+    rng = np.random.default_rng(3)
+    wall = _wall(0.0, (0.0, 4.0), 2.5, step=0.02)
+    wall[:, 1] += rng.normal(0.0, sigma, len(wall))
+    back = _wall(gap, (1.0, 2.5), 0.8, step=0.02)  # the sofa's back, seen from the wall
+    front = _wall(0.25, (1.0, 2.5), 0.8, step=0.02)  # its face to the room
+    screen_back = _wall(0.005, (2.9, 3.7), 0.5, step=0.02)
+    screen_back[:, 2] += 1.3
+    screen = screen_back.copy()
+    screen[:, 1] = 0.055
+    room = grid_patch((0.0, 4.0), (0.0, 3.0), step=0.04)  # the floor: the room is at y > 0
+    parts = [wall, back, front, screen_back, screen, room]
+    for part in parts[1:5]:
+        part[:, 1] += rng.normal(0.0, 0.003, len(part))
+    points = np.concatenate(parts).astype(np.float32)
+    edges = np.cumsum([0] + [len(p) for p in parts])
+    idx = {k: np.arange(edges[i], edges[i + 1]) for i, k in enumerate(
+        ("wall", "back", "front", "screen_back", "screen", "room"))}  # fmt: skip
+    labels = np.zeros(len(points), np.uint8)
+    labels[np.concatenate([idx["back"], idx["front"]])] = Label.SOFA
+    labels[np.concatenate([idx["screen_back"], idx["screen"]])] = Label.TV_MONITOR
+    w = points[idx["wall"]]
+    behind = idx["wall"][(w[:, 0] > 0.95) & (w[:, 0] < 2.55) & (w[:, 2] < 0.85)]
+    labels[behind] = Label.SOFA  # the bleed
+    idx["behind"] = behind
+    return points, labels, idx
+
+
+def test_the_wall_behind_a_sofa_is_wall_the_sofa_and_a_screen_on_it_are_not() -> None:
+    """RANSAC's 2 cm band takes the wall, the back of a sofa 2 cm before it and the screen's back;
+    the plane step keeps the sofa-labelled region (a wide object region) for the objects, the
+    wall behind the sofa with it (generator 4's living rooms: 1,100-1,200 wall points per room
+    regrown as sofa). Refitted on its bare points, the wall's own surface is told from the sofa's
+    back 2 cm before it; what lies on it behind a standing object is wall. A screen hangs on the
+    wall: its back 5 mm off it stays the screen's. A noisy wall (1.2 cm) keeps its band."""
+    for sigma in (0.003, 0.012):
+        points, labels, idx = _sofa_at_a_wall(sigma)
+        # RANSAC's plane between the wall and the sofa's back, turned 0.3 degrees: its offsets
+        # along the wall spread over 2 cm (the refit is what tells the layers apart)
+        turn = np.radians(0.3)
+        model = np.array([-np.sin(turn), np.cos(turn), 0.0, 0.0])
+        inliers = np.concatenate([idx["wall"], idx["back"], idx["screen_back"]])
+        kept = np.concatenate([idx["behind"], idx["back"], idx["screen_back"]])
+        removed = np.setdiff1d(inliers, kept)  # the bare wall
+        plane = Plane(model, inliers, Label.WALL, removed, 1.25)
+        (out,) = walls_behind_objects(points, (plane,), labels, RefineConfig())
+        taken = np.setdiff1d(out.removed, plane.removed)
+        assert out.behind_taken == len(taken)
+        if sigma > 0.01:
+            assert out is plane  # layers 2 cm apart are not told apart in 1.2 cm noise
+            continue
+        assert "behind standing objects" in out.note
+        assert np.isin(idx["behind"], taken).mean() > 0.95
+        assert not np.isin(taken, idx["back"]).any()  # the sofa's back stays the sofa's
+        assert not np.isin(taken, idx["screen_back"]).any()  # the screen hangs on the wall
+        off = RefineConfig(walls_behind_objects=False)
+        assert walls_behind_objects(points, (plane,), labels, off)[0] is plane
+        assert walls_behind_objects(points, (plane,), None, RefineConfig())[0] is plane
+
+
+def test_the_wall_behind_a_sofa_is_wall_through_the_whole_refinement() -> None:
+    """segment_planes finds the wall with the sofa's back in its band and takes in the wall behind
+    the sofa; metrics.json counts it, and without the rule the wall there stays the sofa's."""
+    points, labels, idx = _sofa_at_a_wall(0.003)
+    cfg = RefineConfig(plane_min_points=2000, up=(0.0, 0.0, 1.0))
+    seg = segment_planes(points, cfg, up=None, labels=labels)
+    (wall,) = [p for p in seg.planes if p.label == Label.WALL]
+    assert wall.behind_taken > 0.95 * len(idx["behind"])
+    assert seg.labels[idx["behind"]].mean() > 0.95 * Label.WALL
+    assert (seg.labels[idx["back"]] == 0).mean() > 0.99
+    off = dataclasses.replace(cfg, walls_behind_objects=False)
+    without = segment_planes(points, off, up=None, labels=labels)
+    assert (without.labels[idx["behind"]] == 0).all()
+    # the screen's back: as without the rule (the wide region's rim cells go with the wall)
+    assert (seg.labels[idx["screen_back"]] == without.labels[idx["screen_back"]]).all()
+    assert (seg.labels[idx["screen_back"]] == 0).mean() > 0.95
+    cloud = LabelledCloud(points, np.zeros((len(points), 3), np.uint8), labels)
+    section = refinement_metrics(refine(cloud, cfg), gt_cloud=None)
+    assert sum(p["behind_objects_taken_in"] for p in section["planes"]) == wall.behind_taken
