@@ -341,10 +341,14 @@ def widen_bands(
             continue
         free[taken] = False
         note = f"band {width * 100:.1f} cm: {len(taken)} points of its noise taken in"
-        note = f"{plane.note}; {note}" if plane.note else note
-        removed = np.union1d(plane.removed, taken)
-        out.append(replace(plane, removed=removed, noise_taken=len(taken), note=note))
+        out.append(replace(_taken_in(plane, taken, note), noise_taken=len(taken)))
     return tuple(out)
+
+
+def _taken_in(plane: Plane, taken: npt.NDArray[np.intp], note: str) -> Plane:
+    """Return the plane with `taken` among the points it removes as structure, noted and counted."""
+    note = f"{plane.note}; {note}" if plane.note else note
+    return replace(plane, removed=np.union1d(plane.removed, taken), note=note)
 
 
 def _wall_noise(
@@ -474,9 +478,7 @@ def walls_behind_objects(
             out.append(plane)
             continue
         note = f"{len(taken)} points of its surface behind standing objects taken in"
-        note = f"{plane.note}; {note}" if plane.note else note
-        removed = np.union1d(plane.removed, taken)
-        out.append(replace(plane, removed=removed, behind_taken=len(taken), note=note))
+        out.append(replace(_taken_in(plane, taken, note), behind_taken=len(taken)))
     return tuple(out)
 
 
