@@ -46,7 +46,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import point_spacing
+from process.refine.graph import point_spacing, radius_components
 from process.refine.plane_grid import over_footprint, plane_uv
 
 CELL_M = 0.05  # footprint grid of the top
@@ -63,6 +63,9 @@ SEAT_M = 0.55  # a table cluster no higher than this over the floor ...
 SHEET_M = 0.08  # ... and at most this thick ...
 SEAT_MAX_M = 0.8  # ... and this across (its plan's diagonal) ...
 MIN_CONTACT = 10  # ... with this many points touching a chair is the chair's seat
+POST_UPPER_M = 0.3  # a post the network called table and DBSCAN dropped reaches this close
+POST_TALL = 2.0  # ... under the top, at least this many times as tall as its plan is wide
+MIN_POST = 10  # ... of this many points
 LINK = 2.5  # a lower piece of a leg touches the table: a point within this many point spacings
 THIN_M = 0.08  # a leg is thin: the spread of its points in plan along their widest direction
 
@@ -99,10 +102,12 @@ def legs_under_tables(
     tops: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]]],
     floor: npt.NDArray[np.float64] | None,
     up: npt.NDArray[np.float64],
+    prior: npt.NDArray[np.uint8] | None = None,
 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
     """Return (labels, clusters, relabelled indices) with table legs labelled chair made table.
 
-    `tops`: per table surface its plane and points; `floor`: the floor plane (None: no rule).
+    `tops`: per table surface its plane and points; `floor`: the floor plane (None: no rule);
+    `prior`: the network's labels, if given: its table-labelled posts left 0 become legs too.
     """
     out_labels, out_clusters = labels.copy(), clusters.copy()
     if floor is None or not tops:
@@ -110,25 +115,26 @@ def legs_under_tables(
     pts = np.asarray(points, np.float32)
     floor = floor if float(floor[:3] @ up) >= 0 else -floor
     above_floor = pts @ floor[:3].astype(np.float32) + np.float32(floor[3])
+    dropped = [] if prior is None else _dropped_pieces(pts, labels, prior)
     chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
-    if len(chair) == 0:
+    if len(chair) == 0 and not dropped:
         return out_labels, out_clusters, np.zeros(0, np.intp)
     chair = chair[np.argsort(clusters[chair], kind="stable")]  # grouped by cluster
-    starts = np.flatnonzero(np.r_[True, np.diff(clusters[chair]) != 0])
+    starts = np.flatnonzero(np.r_[len(chair) > 0, np.diff(clusters[chair]) != 0])
     groups = np.split(chair, starts[1:])
     sizes = np.diff(np.r_[starts, len(chair)])
-    lowest = np.minimum.reduceat(above_floor[chair], starts)
+    lowest = np.minimum.reduceat(above_floor[chair], starts) if len(chair) else np.zeros(0)
     changed: list[npt.NDArray[np.intp]] = []
     taken = np.zeros(len(starts), bool)
     for model, surface in tops:
         model = model if float(model[:3] @ up) >= 0 else -model
         offset = pts @ model[:3].astype(np.float32) + np.float32(model[3])
         top = float(np.percentile(offset[surface], 75))  # its upper face (raised.py's reading)
-        highest = np.maximum.reduceat(offset[chair], starts)
+        highest = np.maximum.reduceat(offset[chair], starts) if len(chair) else lowest
         candidates = np.flatnonzero(~taken & (highest <= top + BAND_M) & (lowest <= RAISED_M))
         table = out_clusters[surface][out_labels[surface] == Label.TABLE]
         table = table[table > 0]
-        if len(candidates) == 0 or len(table) == 0:
+        if (len(candidates) == 0 and not dropped) or len(table) == 0:
             continue
         host = int(np.bincount(table).argmax())
         host_points = pts[out_clusters == host]
@@ -136,6 +142,7 @@ def legs_under_tables(
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
         others: npt.NDArray[np.intp] | None = None  # other objects under the top, when asked
+        taken_here = False
         for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
             uv = plane_uv(pts[members], model)
@@ -148,26 +155,84 @@ def legs_under_tables(
                 if lowest[k] > FLOOR_M or not _prism(above_floor[members], uv):
                     continue
                 if others is None:
-                    others = np.flatnonzero(
-                        np.isin(out_labels, OBJECT_LABELS)
-                        & (out_labels != Label.TABLE)
-                        & (offset < top)
-                    )
-                    uv_others = plane_uv(pts[others], model)
-                near = np.all(
-                    (uv_others >= uv.min(axis=0) - ABOVE_M)
-                    & (uv_others <= uv.max(axis=0) + ABOVE_M),
-                    axis=1,
-                )
-                above = near & (offset[others] > highest[k]) & (out_labels[others] != Label.TABLE)
-                above &= out_clusters[others] != out_clusters[members[0]]
-                if above.sum() >= ABOVE_SHARE * len(members):  # a seat or a sitter on it
+                    others = _under_top(out_labels, offset, top)
+                if _sat_on(others, members, uv, offset, out_clusters, model, pts):
                     continue
             out_labels[members], out_clusters[members] = Label.TABLE, host
             changed.append(members)
             taken[k] = True
+            taken_here = True
+        if taken_here:
+            others = None  # legs just made table are no other object
+        for i, members in enumerate(dropped):
+            if members is None or (out_labels[members] != 0).any():
+                continue
+            high = float(offset[members].max())
+            if high > top + BAND_M or high < top - POST_UPPER_M:
+                continue
+            uv = plane_uv(pts[members], model)
+            if (
+                _spread(uv) > THIN_M
+                or over_footprint(uv_top, uv, CELL_M, diagonal=True).mean() < INSIDE
+            ):
+                continue
+            height = above_floor[members]
+            if not _prism(height, uv) or np.ptp(height) < POST_TALL * np.ptp(uv, axis=0).max():
+                continue
+            if others is None:
+                others = _under_top(out_labels, offset, top)
+            if _sat_on(others, members, uv, offset, out_clusters, model, pts):
+                continue
+            out_labels[members], out_clusters[members] = Label.TABLE, host
+            changed.append(members)
+            dropped[i] = None
     relabelled = np.unique(np.concatenate(changed)) if changed else np.zeros(0, np.intp)
     return out_labels, out_clusters, relabelled
+
+
+def _dropped_pieces(
+    pts: npt.NDArray[np.float32], labels: npt.NDArray[np.uint8], prior: npt.NDArray[np.uint8]
+) -> list[npt.NDArray[np.intp] | None]:
+    """Return the pieces of what the network calls table and the refinement left 0.
+
+    Linked within `LINK` point spacings of the cloud; `MIN_POST` points or more.
+    """
+    left = np.flatnonzero((labels == 0) & (prior == Label.TABLE))
+    if len(left) < MIN_POST:
+        return []
+    piece = radius_components(pts[left], LINK * point_spacing(pts))
+    order = np.argsort(piece, kind="stable")
+    groups = np.split(left[order], np.flatnonzero(np.diff(piece[order])) + 1)
+    return [g for g in groups if len(g) >= MIN_POST]
+
+
+def _under_top(
+    labels: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32], top: float
+) -> npt.NDArray[np.intp]:
+    """Return the points of other object classes than table under the top."""
+    return np.flatnonzero(np.isin(labels, OBJECT_LABELS) & (labels != Label.TABLE) & (offset < top))
+
+
+def _sat_on(
+    others: npt.NDArray[np.intp],
+    members: npt.NDArray[np.intp],
+    uv: npt.NDArray[np.float32],
+    offset: npt.NDArray[np.float32],
+    clusters: npt.NDArray[np.int32],
+    model: npt.NDArray[np.float64],
+    pts: npt.NDArray[np.float32],
+) -> bool:
+    """Return whether another object lies above the piece: a seat or a sitter on a chair's leg.
+
+    Within `ABOVE_M` of its plan, as many points as `ABOVE_SHARE` of the piece's.
+    """
+    uv_others = plane_uv(pts[others], model)
+    near = np.all(
+        (uv_others >= uv.min(axis=0) - ABOVE_M) & (uv_others <= uv.max(axis=0) + ABOVE_M), axis=1
+    )
+    above = near & (offset[others] > offset[members].max())
+    above &= clusters[others] != clusters[members[0]]
+    return bool(above.sum() >= ABOVE_SHARE * len(members))
 
 
 def seats_called_table(

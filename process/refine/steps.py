@@ -308,7 +308,7 @@ def refine(
     if cfg.table_legs and planes.up is not None:
         labels_iii, clusters_iii, legs = legs_under_tables(
             cloud.points, labels_iii, clusters_iii, tops, None if floor is None else floor.model,
-            planes.up,
+            planes.up, network,
         )  # fmt: skip
         lap("legs")
     if cfg.chair_seats and planes.up is not None:

@@ -76,6 +76,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 from scipy.stats import median_abs_deviation
 
 from capture.recording import Label
@@ -434,6 +435,7 @@ def behind_walls(
 # a wall's own surface behind what stands before it (walls_behind_objects)
 FRONT_M = 0.15  # an object standing this close before a wall has the wall behind it
 BEHIND_CELL_M = 0.05  # ... over this grid of the wall's plane (a cell and its side neighbours)
+FRONT_NEIGHBOURS = 8  # a point is behind the layer of its nearest standing points before it
 REFITS = 3  # the wall's plane refitted on its bare points this often, ...
 REFIT_SIGMAS = 2.5  # ... each time dropping those this many robust sigmas off it
 
@@ -464,16 +466,26 @@ def walls_behind_objects(
         if surface is None:
             out.append(plane)
             continue
-        model, band = surface
+        model, middle, band = surface
         rest = np.setdiff1d(plane.indices, plane.removed)
-        rest = rest[points[rest].astype(np.float64) @ model[:3] + model[3] <= band]
+        depth = points[rest].astype(np.float64) @ model[:3] + model[3]
+        rest, depth = rest[depth <= band], depth[depth <= band]
         offset = points[standing].astype(np.float64) @ model[:3] + model[3]
-        front = standing[(offset > band) & (offset <= FRONT_M)]
+        ahead = (offset > band) & (offset <= FRONT_M)
+        front, front_depth = standing[ahead], offset[ahead]
         if len(rest) == 0 or len(front) == 0:
             out.append(plane)
             continue
         uv_front, uv_rest = plane_uv(points[front], model), plane_uv(points[rest], model)
-        taken = rest[over_footprint(uv_front, uv_rest, BEHIND_CELL_M)]
+        behind = over_footprint(uv_front, uv_rest, BEHIND_CELL_M)
+        if not behind.any():
+            out.append(plane)
+            continue
+        # nearer the wall than the layer before it: the sofa's back in a noisy band stays
+        _, near = cKDTree(uv_front).query(uv_rest[behind], min(FRONT_NEIGHBOURS, len(front)))
+        level = np.median(front_depth[near.reshape(int(behind.sum()), -1)], axis=1)
+        behind[behind] = depth[behind] < (middle + level) / 2
+        taken = rest[behind]
         if len(taken) == 0:
             out.append(plane)
             continue
@@ -487,8 +499,10 @@ def _own_surface(
     plane: Plane,
     centre: npt.NDArray[np.float64],
     cfg: RefineConfig,
-) -> tuple[npt.NDArray[np.float64], float] | None:
-    """Return a thin wall's plane fitted to its bare points, facing the room, and its band.
+) -> tuple[npt.NDArray[np.float64], float, float] | None:
+    """Return a thin wall's plane fitted to its bare points, their median offset, its band.
+
+    The plane faces the room; the band's upper edge is the offset below which a point is on it.
 
     RANSAC's plane through a wall and a sofa's back 2 cm before it lies between the two and
     tilts (generator 4's living room: the wall's points spread over 3 cm of its offsets); the
@@ -511,4 +525,4 @@ def _own_surface(
         bare = bare[keep]
     offset = bare @ model[:3] + model[3]
     band = max(_noise_band(offset, cfg.structure_band_sigmas), cfg.plane_distance_m / 4)
-    return None if band >= cfg.plane_distance_m else (model, band)
+    return None if band >= cfg.plane_distance_m else (model, float(np.median(offset)), band)
