@@ -147,7 +147,7 @@ def legs_under_tables(
         host_tree = cKDTree(host_points)
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
-        others: npt.NDArray[np.intp] | None = None  # other objects under the top, when asked
+        under = _Under(pts, out_labels, out_clusters, offset, top, model)
         taken_here = False
         for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
@@ -160,16 +160,14 @@ def legs_under_tables(
             if not reaches:
                 if lowest[k] > FLOOR_M or not _prism(above_floor[members], uv):
                     continue
-                if others is None:
-                    others = _under_top(out_labels, offset, top)
-                if _sat_on(others, members, uv, offset, out_clusters, model, pts):
+                if under.sat_on(members, uv):
                     continue
             out_labels[members], out_clusters[members] = Label.TABLE, host
             changed.append(members)
             taken[k] = True
             taken_here = True
         if taken_here:
-            others = None  # legs just made table are no other object
+            under.forget()  # legs just made table are no other object
         for i, members in enumerate(dropped):
             if members is None or (out_labels[members] != 0).any():
                 continue
@@ -185,9 +183,7 @@ def legs_under_tables(
             height = above_floor[members]
             if not _prism(height, uv) or np.ptp(height) < POST_TALL * np.ptp(uv, axis=0).max():
                 continue
-            if others is None:
-                others = _under_top(out_labels, offset, top)
-            if _sat_on(others, members, uv, offset, out_clusters, model, pts):
+            if under.sat_on(members, uv):
                 continue
             out_labels[members], out_clusters[members] = Label.TABLE, host
             changed.append(members)
@@ -212,33 +208,50 @@ def _dropped_pieces(
     return [g for g in groups if len(g) >= MIN_POST]
 
 
-def _under_top(
-    labels: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32], top: float
-) -> npt.NDArray[np.intp]:
-    """Return the points of other object classes than table under the top."""
-    return np.flatnonzero(np.isin(labels, OBJECT_LABELS) & (labels != Label.TABLE) & (offset < top))
+class _Under:
+    """Other objects' points under a top, listed when first asked (most tops ask nothing).
 
-
-def _sat_on(
-    others: npt.NDArray[np.intp],
-    members: npt.NDArray[np.intp],
-    uv: npt.NDArray[np.float32],
-    offset: npt.NDArray[np.float32],
-    clusters: npt.NDArray[np.int32],
-    model: npt.NDArray[np.float64],
-    pts: npt.NDArray[np.float32],
-) -> bool:
-    """Return whether another object lies above the piece: a seat or a sitter on a chair's leg.
-
-    Within `ABOVE_M` of its plan, as many points as `ABOVE_SHARE` of the piece's.
+    `labels` and `clusters` are the rule's own arrays, read as they change.
     """
-    uv_others = plane_uv(pts[others], model)
-    near = np.all(
-        (uv_others >= uv.min(axis=0) - ABOVE_M) & (uv_others <= uv.max(axis=0) + ABOVE_M), axis=1
-    )
-    above = near & (offset[others] > offset[members].max())
-    above &= clusters[others] != clusters[members[0]]
-    return bool(above.sum() >= ABOVE_SHARE * len(members))
+
+    def __init__(
+        self,
+        pts: npt.NDArray[np.float32],
+        labels: npt.NDArray[np.uint8],
+        clusters: npt.NDArray[np.int32],
+        offset: npt.NDArray[np.float32],
+        top: float,
+        model: npt.NDArray[np.float64],
+    ) -> None:
+        self.pts, self.labels, self.clusters = pts, labels, clusters
+        self.offset, self.top, self.model = offset, top, model
+        self.rows: npt.NDArray[np.intp] | None = None
+        self.uv = np.zeros((0, 2), np.float32)
+
+    def forget(self) -> None:
+        """Drop the list: list anew when next asked."""
+        self.rows = None
+
+    def sat_on(self, members: npt.NDArray[np.intp], uv: npt.NDArray[np.float32]) -> bool:
+        """Return whether another object lies above the piece: a seat or a sitter on a leg.
+
+        Within `ABOVE_M` of its plan, as many points as `ABOVE_SHARE` of the piece's.
+        """
+        if self.rows is None:
+            labels, offset = self.labels, self.offset
+            self.rows = np.flatnonzero(
+                np.isin(labels, OBJECT_LABELS) & (labels != Label.TABLE) & (offset < self.top)
+            )
+            self.uv = plane_uv(self.pts[self.rows], self.model)
+        rows, uv_rows = self.rows, self.uv
+        near = np.all(
+            (uv_rows >= uv.min(axis=0) - ABOVE_M) & (uv_rows <= uv.max(axis=0) + ABOVE_M), axis=1
+        )
+        above = near & (self.offset[rows] > self.offset[members].max())
+        above &= (self.labels[rows] != Label.TABLE) & (
+            self.clusters[rows] != self.clusters[members[0]]
+        )
+        return bool(above.sum() >= ABOVE_SHARE * len(members))
 
 
 def seats_called_table(
