@@ -438,6 +438,7 @@ BEHIND_CELL_M = 0.05  # ... over this grid of the wall's plane (a cell and its s
 FRONT_NEIGHBOURS = 8  # a point is behind the layer of its nearest standing points before it
 REFITS = 3  # the wall's plane refitted on its bare points this often, ...
 REFIT_SIGMAS = 2.5  # ... each time dropping those this many robust sigmas off it
+REFIT_TURN_DEG = 10.0  # a refit turned further from RANSAC's plane is not the wall's
 
 
 def walls_behind_objects(
@@ -507,7 +508,8 @@ def _own_surface(
     RANSAC's plane through a wall and a sofa's back 2 cm before it lies between the two and
     tilts (generator 4's living room: the wall's points spread over 3 cm of its offsets); the
     least-squares plane of the points it removed as wall, refitted without those off it, is the
-    wall's own. None for a plane that is no wall, or whose band is RANSAC's (a noisy wall).
+    wall's own. None for a plane that is no wall, whose band is RANSAC's (a noisy wall), or whose
+    refit turns more than `REFIT_TURN_DEG` from RANSAC's plane (bare points along a strip).
     """
     if plane.label != Label.WALL or len(plane.removed) < 10:
         return None
@@ -523,6 +525,8 @@ def _own_surface(
         if keep.sum() < 10:
             break
         bare = bare[keep]
+    if abs(float(model[:3] @ plane.model[:3])) < math.cos(math.radians(REFIT_TURN_DEG)):
+        return None  # bare points on a line or a strip: no plane of their own to trust
     offset = bare @ model[:3] + model[3]
     band = max(_noise_band(offset, cfg.structure_band_sigmas), cfg.plane_distance_m / 4)
     return None if band >= cfg.plane_distance_m else (model, float(np.median(offset)), band)

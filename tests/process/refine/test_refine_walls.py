@@ -19,6 +19,7 @@ from process.refine.plane_grid import wide_object_regions
 from process.refine.planes import Plane, segment_planes
 from process.refine.ransac import best_plane
 from process.refine.walls import (
+    _own_surface,
     behind_walls,
     furniture_fronts,
     main_floor,
@@ -430,3 +431,24 @@ def test_a_sofa_back_within_a_walls_widened_band_stays_the_sofas() -> None:
     taken = np.setdiff1d(out.removed, plane.removed)
     assert np.isin(idx["behind"], taken).mean() > 0.9
     assert np.isin(back, taken).mean() < 0.05
+
+
+def test_a_wall_whose_bare_points_lie_on_a_line_has_no_surface_of_its_own() -> None:
+    """Bare points along one line (a wall seen as a strip) fix no plane: their least spread is
+    along the line's own noise, and the least-squares fit turns about it (here to a level plane).
+    A refit more than REFIT_TURN_DEG from RANSAC's plane is no surface: the wall takes nothing
+    in. Bare points spread over the wall give the wall's own plane."""
+    points, labels, idx = _sofa_at_a_wall(0.003)
+    wall = idx["wall"]
+    line = wall[np.abs(points[wall, 2] - 0.7) < 0.005]  # one row of the grid, 4 m long
+    points[line, 1] = 0.005 * np.sin(np.arange(len(line)))  # its noise across the wall ...
+    points[line, 2] = 0.7  # ... and none along it: the least spread is upwards
+    inliers = np.concatenate([wall, idx["back"], idx["screen_back"]])
+    model = np.array([0.0, 1.0, 0.0, 0.0])
+    centre = points.mean(axis=0, dtype=np.float64)
+    strip = Plane(model, inliers, Label.WALL, line, 1.25)
+    assert _own_surface(points, strip, centre, RefineConfig()) is None
+    assert walls_behind_objects(points, (strip,), labels, RefineConfig())[0] is strip
+    spread = Plane(model, inliers, Label.WALL, np.setdiff1d(wall, idx["behind"]), 1.25)
+    surface = _own_surface(points, spread, centre, RefineConfig())
+    assert surface is not None and abs(surface[0][1]) > 0.999
