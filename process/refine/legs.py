@@ -148,7 +148,6 @@ def legs_under_tables(
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
         under = _Under(pts, out_labels, out_clusters, offset, top, model)
-        taken_here = False
         for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
             uv = plane_uv(pts[members], model)
@@ -165,11 +164,8 @@ def legs_under_tables(
             out_labels[members], out_clusters[members] = Label.TABLE, host
             changed.append(members)
             taken[k] = True
-            taken_here = True
-        if taken_here:
-            under.forget()  # legs just made table are no other object
-        for i, members in enumerate(dropped):
-            if members is None or (out_labels[members] != 0).any():
+        for members in dropped:
+            if (out_labels[members] != 0).any():  # taken under an earlier top
                 continue
             high = float(offset[members].max())
             if high > top + BAND_M or high < top - POST_UPPER_M:
@@ -187,14 +183,13 @@ def legs_under_tables(
                 continue
             out_labels[members], out_clusters[members] = Label.TABLE, host
             changed.append(members)
-            dropped[i] = None
     relabelled = np.unique(np.concatenate(changed)) if changed else np.zeros(0, np.intp)
     return out_labels, out_clusters, relabelled
 
 
 def _dropped_pieces(
     pts: npt.NDArray[np.float32], labels: npt.NDArray[np.uint8], prior: npt.NDArray[np.uint8]
-) -> list[npt.NDArray[np.intp] | None]:
+) -> list[npt.NDArray[np.intp]]:
     """Return the pieces of what the network calls table and the refinement left 0.
 
     Linked within `LINK` point spacings of the cloud; `MIN_POST` points or more.
@@ -211,7 +206,8 @@ def _dropped_pieces(
 class _Under:
     """Other objects' points under a top, listed when first asked (most tops ask nothing).
 
-    `labels` and `clusters` are the rule's own arrays, read as they change.
+    `labels` and `clusters` are the rule's own arrays, read as they change: a piece made table
+    after the list was taken is no other object.
     """
 
     def __init__(
@@ -227,10 +223,6 @@ class _Under:
         self.offset, self.top, self.model = offset, top, model
         self.rows: npt.NDArray[np.intp] | None = None
         self.uv = np.zeros((0, 2), np.float32)
-
-    def forget(self) -> None:
-        """Drop the list: list anew when next asked."""
-        self.rows = None
 
     def sat_on(self, members: npt.NDArray[np.intp], uv: npt.NDArray[np.float32]) -> bool:
         """Return whether another object lies above the piece: a seat or a sitter on a leg.
