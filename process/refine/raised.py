@@ -18,10 +18,16 @@ The other way round, a monitor stands on a desk, never under its top: the networ
 label bleeds around a monitor's foot onto the desk and through the top onto its underside. The
 points labelled monitor below a top's noise band, down to `SLAB_M` under it and over its
 footprint, are the desk's (generator 4's offices at 60k object points, 5 fresh seeds: 1,893 such
-points were desk, 51 monitor). Those within the band stay: there a monitor's base plate, 1 cm
-thick, and the desk around it mix. Clutter stays too: a shelf board at desk height passes for a
-table's top, and the books on the shelf under it are clutter (generator 3's rooms 1 and 2: 415
-and 354 points).
+points were desk, 51 monitor). So are those level with the desk: within `LEVEL_SIGMAS` of the
+desk's plane refitted by least squares on its band (RANSAC's plane through both faces of a thin
+top tilts by millimetres over a desk), while a monitor's base plate, 1.2 cm thick, stands 3.5-5
+noise sigmas above it (the five offices: desk points labelled monitor 2,945 -> 173; monitor points
+labelled table 2,320 -> 3,192, mostly plates' rims and their bottom faces, which the generator
+keeps level with the desk). A top whose band strays from one plane (more than `LEVEL_OFF` of its
+points beyond `LEVEL_SIGMAS`: a fused map's warped desk; TUM `fr1_rpy`'s three tops 28-47 %,
+generator 4's 7-17 %) has no level and sinks nothing. Clutter stays: a shelf board at desk
+height passes for a table's top, and the books on the shelf under it are clutter (generator 3's
+rooms 1 and 2: 415 and 354 points).
 
 Written here because no library relabels over such pieces; the graph is SciPy's (graph.py).
 Measured on generator 4's office at 200k object points (issue 12): see the README.
@@ -57,6 +63,9 @@ FLAT_ON_TABLES = (Label.TV_MONITOR, Label.CLUTTER)  # ... unless it joins what l
 SHEET_TILT_DEG = 25.0
 SIGMA_PROBES = 2000  # points of a top whose offsets from their neighbours' give its noise
 MIN_TOP_POINTS = 100  # a top's piece with fewer points has no measurable top or noise
+LEVEL_SIGMAS = 2.0  # a point this near the refitted desk plane is level with it
+LEVEL_REFITS = 3  # least-squares refits of the desk plane, each on the points level with the last
+LEVEL_OFF = 0.2  # a top with more of its band beyond LEVEL_SIGMAS is not one plane: no level
 
 
 @dataclass(frozen=True)
@@ -119,9 +128,10 @@ def _above(
     surface: npt.NDArray[np.intp],
     up: npt.NDArray[np.float64],
 ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """Return the points above the top's band over one of its pieces, and those below it.
+    """Return the points above the top's band over one of its pieces, and those under it.
 
-    Above: up to REACH_M over the band; below: down to SLAB_M under the top.
+    Above: up to REACH_M over the band; under: down to SLAB_M below the band, or level with the
+    desk (_level).
 
     Per connected piece of the surface (a desk): its top is the upper quartile of its points'
     offsets from the plane, as RANSAC's 2 cm band takes both faces of a thin desk top seen
@@ -152,7 +162,7 @@ def _above(
         band, below = top + width, top - width  # the band's upper and lower edges
         uv_own = uv_surface[in_piece]
         low, high = uv_own.min(axis=0) - CELL_M, uv_own.max(axis=0) + CELL_M
-        pick = ((h > band) & (h <= top + REACH_M)) | ((h < below) & (h >= top - SLAB_M))
+        pick = (h <= top + REACH_M) & (h >= top - SLAB_M)
         pick[pick] &= np.all((uv_near[pick] >= low) & (uv_near[pick] <= high), axis=1)
         rows, uv_rows = near_top[pick], uv_near[pick]
         if len(rows) == 0:
@@ -162,15 +172,41 @@ def _above(
         footprint = np.zeros(shape, bool)
         footprint[ij[: len(members), 0], ij[: len(members), 1]] = True
         footprint = ndimage.binary_closing(footprint, np.ones((3, 3), bool))  # under objects
-        rows = rows[footprint[ij[len(members) :, 0], ij[len(members) :, 1]]]
-        up_side = offset[rows] > band
-        out.append(rows[up_side])
-        under.append(rows[~up_side])
+        inside = footprint[ij[len(members) :, 0], ij[len(members) :, 1]]
+        rows, h_rows = rows[inside], offset[rows[inside]].astype(np.float64)
+        in_band = (h_rows >= below) & (h_rows <= band)
+        out.append(rows[h_rows > band])
+        under.append(rows[(h_rows < below) | _level(uv_rows[inside], h_rows, in_band, sigma)])
     none = np.zeros(0, np.intp)
     return (
         np.unique(np.concatenate(out)) if out else none,
         np.unique(np.concatenate(under)) if under else none,
     )
+
+
+def _level(
+    uv: npt.NDArray[np.float32],
+    h: npt.NDArray[np.float64],
+    in_band: npt.NDArray[np.bool_],
+    sigma: float,
+) -> npt.NDArray[np.bool_]:
+    """Return which points of the band lie level with the desk: near its refitted plane.
+
+    The plane h = a u + b v + c is fitted by least squares on the band, then LEVEL_REFITS times
+    on the band's points within LEVEL_SIGMAS of the last fit (a base plate or a keyboard on the
+    desk drops out). None is level when the band is not one plane (LEVEL_OFF).
+    """
+    level = np.zeros(len(h), bool)
+    design = np.column_stack([uv.astype(np.float64), np.ones(len(h))])
+    near = in_band
+    for _ in range(LEVEL_REFITS + 1):
+        if near.sum() < MIN_TOP_POINTS:
+            return level
+        coef, *_ = np.linalg.lstsq(design[near], h[near], rcond=None)
+        near = in_band & (np.abs(h - design @ coef) <= LEVEL_SIGMAS * sigma)
+    if 1.0 - near.sum() / in_band.sum() > LEVEL_OFF:
+        return level
+    return near
 
 
 def _vote(

@@ -200,9 +200,10 @@ def test_refine_gives_the_bled_underside_to_the_desk_and_counts_it() -> None:
 
 def test_monitor_labels_under_a_desk_top_go_to_the_desk() -> None:
     """The monitor's label bled through the desk onto its underside, 3 cm under the top, and
-    onto the top around the plate. Under the top's band, over its footprint, it is the desk's;
-    within the band (the plate's rim) it stays. Clutter stays clutter: books on a shelf 4 cm
-    under a board that passes for a table's top, a box on the floor; so does a person's knee."""
+    onto the top around the plate. Under the top's band, over its footprint, it is the desk's,
+    and so is the ring level with the desk; the plate's top, 1.1 cm up, stays. Clutter stays
+    clutter: books on a shelf 4 cm under a board that passes for a table's top, a box on the
+    floor; so does a person's knee."""
     parts = _desk_with_monitor(np.random.default_rng(3))
     underside = parts["desk"].copy()
     underside[:, 2] -= 0.03
@@ -228,12 +229,59 @@ def test_monitor_labels_under_a_desk_top_go_to_the_desk() -> None:
     vote = raised_off_tables(points, labels, clusters, tops, UP)
     assert (vote.labels[bled] == Label.TABLE).all()
     assert (vote.clusters[bled] == 1).all()  # into the desk's object
-    # within the band the ring stays, but for its noise tail under the band (desk, rightly)
-    assert set(vote.relabelled) <= set(bled) | set(ring)
+    # the ring is level with the desk but for its noise tail: 2 sigmas of the local noise
+    # estimate (1.5 mm for this 2 mm noise; 89 % of the ring measured)
+    assert (vote.labels[ring] == Label.TABLE).mean() > 0.85
+    assert (vote.clusters[ring][vote.labels[ring] == Label.TABLE] == 1).all()
+    plate_low = at["plate"][points[at["plate"], 2] < DESK_Z + 0.005]  # its hidden bottom face
+    assert set(vote.relabelled) <= set(bled) | set(ring) | set(plate_low)
     assert vote.sunk == len(vote.relabelled)
-    assert (vote.labels[ring] == Label.TV_MONITOR).mean() > 0.95
-    assert (vote.labels[at["plate"]] == Label.TV_MONITOR).all()
+    plate_top = at["plate"][points[at["plate"], 2] > DESK_Z + 0.008]
+    assert (vote.labels[plate_top] == Label.TV_MONITOR).all()
     assert (vote.labels[at["floor_box"]] == Label.CLUTTER).all()  # far under the top
     assert (vote.labels[at["books"]] == Label.CLUTTER).all()
     assert (vote.labels[at["off"]] == Label.TV_MONITOR).all()  # beyond the desk's footprint
     assert (vote.labels[at["knee"]] == Label.PERSON).all()
+
+
+def _ringed(seed: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """The desk and monitor, the monitor's label bled onto the desk in a ring round the plate."""
+    points, at = _scene(_desk_with_monitor(np.random.default_rng(seed)))
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    for name in ("screen", "stand", "plate"):
+        labels[at[name]] = Label.TV_MONITOR
+    ring = at["desk"][np.abs(points[at["desk"], :2] - [0.39, 0.41]).max(axis=1) < 0.2]
+    labels[ring] = Label.TV_MONITOR
+    return points, at, labels, ring
+
+
+def test_the_ring_sinks_under_a_plane_tilted_off_the_desk() -> None:
+    """RANSAC's plane through both faces of a thin top tilts: here 0.35 degrees, 1 cm over the
+    desk's 1.6 m. The desk's plane refitted on the band still finds the ring level with it
+    and the plate's top 1.1 cm above it."""
+    points, at, labels, ring = _ringed(7)
+    tilt = np.radians(0.35)
+    normal = np.array([np.sin(tilt), 0.0, np.cos(tilt)])
+    plane = np.array([*normal, -float(normal @ [0.8, 0.4, DESK_Z])])
+    clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
+    vote = raised_off_tables(points, labels, clusters, [(plane, at["desk"])], UP)
+    assert (vote.labels[ring] == Label.TABLE).mean() > 0.85
+    plate_top = at["plate"][points[at["plate"], 2] > DESK_Z + 0.008]
+    assert (vote.labels[plate_top] == Label.TV_MONITOR).all()
+    # without the refit (the plane's own offsets) the tilt takes the ring's far side out
+    offset = points[ring] @ plane[:3] + plane[3]
+    assert np.ptp(offset) > 0.003
+
+
+def test_a_warped_desk_sinks_nothing_within_its_band() -> None:
+    """A fused map's desk bent by drift (here a 4 mm wave over 0.8 m, twice the noise) is not
+    one plane: nothing in its band is level with it, and the ring keeps its label there."""
+    points, at, labels, ring = _ringed(8)
+    desk = at["desk"]
+    points[desk, 2] += 0.004 * np.sin(2 * np.pi * points[desk, 0] / 0.8)
+    clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
+    tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), desk)]
+    vote = raised_off_tables(points, labels, clusters, tops, UP)
+    high = ring[points[ring, 2] >= DESK_Z]  # within the band (only troughs fall under it)
+    assert len(high) > 500
+    assert (vote.labels[high] == Label.TV_MONITOR).all()
