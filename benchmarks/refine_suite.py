@@ -235,6 +235,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--labels", type=Path, help="write each cloud's phase-III labels here (NAME.npy)"
     )
+    parser.add_argument(
+        "--ceiling",
+        action="store_true",
+        help="also each cloud's F1 with every true object at its phase-I majority (ceiling.py)",
+    )
     args = parser.parse_args(argv)
     cfg = RefineConfig.paper() if args.paper else RefineConfig()
     try:
@@ -256,7 +261,8 @@ def main(argv: list[str] | None = None) -> int:
         objects = int((case.truth >= 4).sum())
         print(
             f"{name:24s} {len(case.cloud):>9,} {objects:>9,}  I {f1['I']:.4f}  II {f1['II']:.4f}"
-            f"  III {f1['III']:.4f}  {f1['III'] - f1['I']:+.4f}  {seconds:5.1f} s",
+            f"  III {f1['III']:.4f}  {f1['III'] - f1['I']:+.4f}  {seconds:5.1f} s"
+            + (f"  ceiling {_ceiling(case):.4f}" if args.ceiling else ""),
             flush=True,
         )
         gains.setdefault(_group(name), []).append((f1["I"], f1["III"]))
@@ -266,6 +272,12 @@ def main(argv: list[str] | None = None) -> int:
     for group, pairs in gains.items():
         print(_summary(group, pairs))
     return 0
+
+
+def _ceiling(case: Case) -> float:
+    from benchmarks.ceiling import majority_ceiling
+
+    return majority_ceiling(case.cloud.points, case.cloud.labels, case.truth)
 
 
 def _summary(group: str, pairs: list[tuple[float, float]]) -> str:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks import refine_suite
+from benchmarks.ceiling import majority_ceiling
 from benchmarks.refine_suite import Case, cases, held_out, load
 from capture.recording import Label
 from process.cloud import LabelledCloud
@@ -94,3 +95,36 @@ def test_a_groups_line_counts_the_clouds_at_095_and_those_gaining_005() -> None:
     pairs = [(0.80, 0.96), (0.93, 0.96), (0.90, 0.94), (0.88, 0.955)]  # (phase I, phase III)
     line = refine_suite._summary("rec", pairs)
     assert line == "rec: mean III 0.954, 3 of 4 >= 0.95, 2 >= I + 0.05"  # not 0.90 -> 0.94
+
+
+def _blobs() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Three chairs' and a sofa's worth of points 1 m apart: a chair 70 % right, a sofa the
+    network calls chair on most of its points, a chair it missed whole, chair labels on a wall."""
+    grid = np.stack(np.meshgrid(np.arange(10), np.arange(10)), -1).reshape(-1, 2) * 0.01
+    blob = np.column_stack([grid, np.zeros(100)])
+    points = np.concatenate([blob + np.array([x, 0.0, 0.0]) for x in (0.0, 1.0, 2.0, 3.0)])
+    truth = np.repeat(np.array([Label.CHAIR, Label.SOFA, Label.CHAIR, Label.WALL], np.uint8), 100)
+    labels = np.zeros(400, np.uint8)
+    labels[:70], labels[70:100] = Label.CHAIR, Label.SOFA
+    labels[100:160] = Label.CHAIR  # the sofa, 40 of its points unlabelled
+    labels[300:320] = Label.CHAIR  # on the wall
+    return points, labels, truth
+
+
+def test_the_ceiling_gives_each_true_object_its_majority_and_leaves_the_rest() -> None:
+    """The first chair keeps its class whole, the sofa becomes chair whole, the missed chair
+    stays unlabelled, the wall's chair labels stay: TP 100, FP 120, FN 200."""
+    points, labels, truth = _blobs()
+    assert majority_ceiling(points, labels, truth) == pytest.approx(200 / 520)
+    assert majority_ceiling(points, truth, truth) == pytest.approx(1.0)
+
+
+def test_ceiling_prints_each_clouds_ceiling_beside_its_phases(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    points, labels, truth = _blobs()
+    cloud = LabelledCloud(points.astype(np.float32), np.zeros((400, 3), np.uint8), labels)
+    monkeypatch.setattr(refine_suite, "cases", lambda: {"blobs": lambda: Case(cloud, truth, None)})
+    assert refine_suite.main(["--cache", str(tmp_path), "--ceiling"]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line.startswith("blobs") and line.endswith("ceiling 0.3846")

@@ -1,0 +1,56 @@
+"""The best a refinement can do that gives every object the class most of its points carry.
+
+A network that confuses an object in most views (generator 5's `confusion_share`) leaves it with
+the wrong class on most of its points after fusion, and no step of the paper's method overrules a
+majority. Here every true object (the connected points of one true class, `LINK_M` apart) takes
+its phase-I majority object label, points the network left unlabelled or gave structure not
+counting; an object with no object label keeps its labels, and so does everything else (the
+network's object labels on structure stay). The pooled F1 of that labelling is the most such a
+refinement reaches on the objects; it scores above it only by taking the network's object labels
+off structure, which this labelling leaves (`python -m benchmarks.refine_suite --ceiling`).
+
+Written here because it needs the ground truth, which no library step has.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from capture.recording import OBJECT_LABELS
+from process.evaluate import label_metrics
+
+LINK_M: Final = 0.035  # points of one true class this near are one object (voxels up to 3 cm)
+
+
+def majority_ceiling(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    truth: npt.NDArray[np.uint8],
+    link_m: float = LINK_M,
+) -> float:
+    """Return the pooled object F1 when every true object takes its majority phase-I label."""
+    objects = np.flatnonzero(np.isin(truth, OBJECT_LABELS))
+    out = labels.copy()
+    if len(objects):
+        pairs = cKDTree(np.asarray(points[objects], np.float64)).query_pairs(
+            link_m, output_type="ndarray"
+        )
+        pairs = pairs[truth[objects[pairs[:, 0]]] == truth[objects[pairs[:, 1]]]]
+        graph = coo_matrix(
+            (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(objects),) * 2
+        )
+        _, component = connected_components(graph, directed=False)
+        for members in np.split(
+            objects[np.argsort(component)], np.cumsum(np.bincount(component))[:-1]
+        ):
+            voted = labels[members]
+            voted = voted[np.isin(voted, OBJECT_LABELS)]
+            if len(voted):
+                out[members] = np.bincount(voted).argmax()
+    return float(label_metrics(out, truth)["all"]["f1"])
