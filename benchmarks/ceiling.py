@@ -1,13 +1,14 @@
-"""The best a refinement can do that gives every object the class most of its points carry.
+"""What a refinement reaches that gives every object the class most of its points carry.
 
 A network that confuses an object in most views (generator 5's `confusion_share`) leaves it with
 the wrong class on most of its points after fusion, and no step of the paper's method overrules a
 majority. Here every true object (the connected points of one true class, `LINK_M` apart) takes
-its phase-I majority object label, points the network left unlabelled or gave structure not
-counting; an object with no object label keeps its labels, and so does everything else (the
-network's object labels on structure stay). The pooled F1 of that labelling is the most such a
-refinement reaches on the objects; it scores above it only by taking the network's object labels
-off structure, which this labelling leaves (`python -m benchmarks.refine_suite --ceiling`).
+its phase-I majority object label (points the network left unlabelled or gave structure do not
+vote; an object with no object label keeps its labels), and every point that is no object loses
+any object label (the best a refinement can do there). The pooled F1 of that labelling is what a
+refinement that gives each object one class, its network majority, reaches at best; objects of
+one class that touch count as one, so a refinement that splits them can score above it
+(`python -m benchmarks.refine_suite --ceiling`).
 
 Written here because it needs the ground truth, which no library step has.
 """
@@ -36,7 +37,7 @@ def majority_ceiling(
 ) -> float:
     """Return the pooled object F1 when every true object takes its majority phase-I label."""
     objects = np.flatnonzero(np.isin(truth, OBJECT_LABELS))
-    out = labels.copy()
+    out = np.where(np.isin(truth, OBJECT_LABELS), labels, truth).astype(np.uint8)
     if len(objects):
         pairs = cKDTree(np.asarray(points[objects], np.float64)).query_pairs(
             link_m, output_type="ndarray"
