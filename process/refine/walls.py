@@ -44,8 +44,11 @@ that lie within that wall's band, with a point the network calls a standing clas
 chair, person, plant, sofa) up to `FRONT_M` before them in their cell or the next
 (`BEHIND_CELL_M`), are the wall behind that object, and the wall takes them in
 (`walls_behind_objects`). What hangs on a wall, a screen, may lie within the band (generator 4's
-wall TV: its back face 5 mm off the wall) and is left alone; so is a noisy wall, whose band
-cannot tell a layer 2 cm before it.
+wall TV: its back face 5 mm off the wall) and is left alone. A noisy wall's band (its refit's, at
+most `WIDE_CAP` plane distances) cannot tell a sofa's back 2 cm before it, so there only a
+plant's foliage counts as standing before it (`NOISY_FRONT`): foliage never lies flat on a wall,
+and the network's plant label bleeds onto the wall right behind it (generator 5's rooms at 60k,
+walls fused from raw depth with a robust sigma of 0.9-1.5 cm: +0.003 to +0.009).
 
 Points behind a wall: an object in front of a wall never grows through it. Where a wall has a
 door or window recess, the recess's back and jambs stand 5-15 cm behind the wall plane, unlabelled
@@ -439,6 +442,7 @@ FRONT_NEIGHBOURS = 8  # a point is behind the layer of its nearest standing poin
 REFITS = 3  # the wall's plane refitted on its bare points this often, ...
 REFIT_SIGMAS = 2.5  # ... each time dropping those this many robust sigmas off it
 REFIT_TURN_DEG = 10.0  # a refit turned further from RANSAC's plane is not the wall's
+NOISY_FRONT = (Label.PLANT,)  # the standing classes before a noisy wall
 
 
 def walls_behind_objects(
@@ -467,12 +471,14 @@ def walls_behind_objects(
         if surface is None:
             out.append(plane)
             continue
-        model, middle, band = surface
+        model, middle, band, noisy = surface
         rest = np.setdiff1d(plane.indices, plane.removed)
         depth = points[rest].astype(np.float64) @ model[:3] + model[3]
         rest, depth = rest[depth <= band], depth[depth <= band]
         offset = points[standing].astype(np.float64) @ model[:3] + model[3]
         ahead = (offset > band) & (offset <= FRONT_M)
+        if noisy:
+            ahead &= np.isin(labels[standing], NOISY_FRONT)
         front, front_depth = standing[ahead], offset[ahead]
         if len(rest) == 0 or len(front) == 0:
             out.append(plane)
@@ -500,16 +506,17 @@ def _own_surface(
     plane: Plane,
     centre: npt.NDArray[np.float64],
     cfg: RefineConfig,
-) -> tuple[npt.NDArray[np.float64], float, float] | None:
-    """Return a thin wall's plane fitted to its bare points, their median offset, its band.
+) -> tuple[npt.NDArray[np.float64], float, float, bool] | None:
+    """Return a wall's plane fitted to its bare points, their median offset, band and noise.
 
-    The plane faces the room; the band's upper edge is the offset below which a point is on it.
+    Noisy: its band is wider than RANSAC's (and then at most WIDE_CAP plane distances). The plane
+    faces the room; the band's upper edge is the offset below which a point is on it.
 
     RANSAC's plane through a wall and a sofa's back 2 cm before it lies between the two and
     tilts (generator 4's living room: the wall's points spread over 3 cm of its offsets); the
     least-squares plane of the points it removed as wall, refitted without those off it, is the
-    wall's own. None for a plane that is no wall, whose band is RANSAC's (a noisy wall), or whose
-    refit turns more than `REFIT_TURN_DEG` from RANSAC's plane (bare points along a strip).
+    wall's own. None for a plane that is no wall or whose refit turns more than `REFIT_TURN_DEG`
+    from RANSAC's plane (bare points along a strip).
     """
     if plane.label != Label.WALL or len(plane.removed) < 10:
         return None
@@ -529,4 +536,6 @@ def _own_surface(
         return None  # bare points on a line or a strip: no plane of their own to trust
     offset = bare @ model[:3] + model[3]
     band = max(_noise_band(offset, cfg.structure_band_sigmas), cfg.plane_distance_m / 4)
-    return None if band >= cfg.plane_distance_m else (model, float(np.median(offset)), band)
+    noisy = band >= cfg.plane_distance_m
+    band = min(band, WIDE_CAP * cfg.plane_distance_m)
+    return model, float(np.median(offset)), band, noisy

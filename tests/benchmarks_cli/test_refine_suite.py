@@ -71,7 +71,7 @@ def test_set_out_of_range_is_a_one_line_error() -> None:
 
 def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
     held = held_out()
-    assert len(held) == len(set(held)) == 132
+    assert len(held) == len(set(held)) == 152
 
     def seed(
         name: str,
@@ -82,13 +82,14 @@ def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
     seeds = {seed(name) for name in held}
     tuned = set()
     for name, make in cases().items():
-        if name.split()[0] in ("g2", "g3", "g4", "rec"):
+        if name.split()[0] in ("g2", "g3", "g4", "g5", "rec"):
             assert isinstance(make, partial)
             tuned.add((name.split()[0], make.args[0]))
-    assert len(tuned) == 14 + 8 + 12 + 5 and not seeds & tuned
+    assert len(tuned) == 14 + 8 + 12 + 8 + 5 and not seeds & tuned
     groups = {refine_suite._group(n) for n in held}
-    assert groups == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k", "rec"}
+    assert groups == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k", "g5 60k", "g5 200k", "rec"}
     assert refine_suite._group("g4 office 60k") == "g4"  # the suite's g4 line stays one
+    assert refine_suite._group("g5 seed 3 200k") == "g5"
 
 
 def test_a_groups_line_counts_the_clouds_at_095_and_those_gaining_005() -> None:
