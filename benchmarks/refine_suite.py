@@ -168,9 +168,9 @@ def held_out() -> dict[str, Callable[[], Case]]:
             made[f"g4 {points // 1000}k {ROOMS[seed % 4]} {seed}"] = partial(_gen4, seed, points)
     for seed in range(200, 204):
         made[f"g4 500k {ROOMS[seed % 4]} {seed}"] = partial(_gen4, seed, 500_000)
-    for points, seeds in (("60k", range(100, 116)), ("200k", range(100, 104))):
-        for seed in seeds:
-            made[f"g5 {points} {ROOMS[seed % 4]} {seed}"] = partial(_gen5, seed, points)
+    for size, g5_seeds in (("60k", range(100, 116)), ("200k", range(100, 104))):
+        for seed in g5_seeds:
+            made[f"g5 {size} {ROOMS[seed % 4]} {seed}"] = partial(_gen5, seed, size)
     for seed in range(20, 28):
         made[f"rec seed {seed} 300f"] = partial(_recording, seed)
     return made

@@ -108,7 +108,9 @@ def regrow(
             on them, and the box of an object standing on the floor reaches down to it; so a
             table's growth crept along a floor fused from raw depth, which lies in two layers
             1 cm apart whose upper one the noise band gives back (generator 5's meeting room
-            at 60k: 2,400 floor points made table).
+            at 60k: 2,400 floor points made table). With `surface_link` they join only in
+            the waves along surfaces, from a leg's foot, not across r1: a chair's r1 reached
+            the layer under its whole seat (that room: 746 floor points made chair).
         nest: an object whose box lies inside the box of an object of another class (a
             wrong-class patch on a television, a table leg called chair) takes back only the
             points the network gave its class (`prior`), none of the unlabelled ones: in the
@@ -175,6 +177,8 @@ def regrow(
         for step in steps:
             frontier = np.flatnonzero((clusters > 0) if leaf is None else (clusters > 0) & ~leaf)
             open_ = (labels == 0) if keep_out is None else (labels == 0) & ~keep_out
+            if leaf is not None and step == np.inf and surface_link > 0:
+                open_ &= ~leaf  # leaves join along surfaces only: not under a seat across r1
             open_ = np.flatnonzero(open_)
             while len(frontier) and len(open_):
                 joined, row = _wave(

@@ -510,6 +510,38 @@ def test_floor_points_join_from_a_leg_but_relay_no_growth() -> None:
     assert (near[joined] <= 0.05).all()  # only beside the legs
 
 
+def test_floor_leaves_join_only_along_surfaces_not_across_r1() -> None:
+    """A chair (seat 0.45 m up, 0.5 m square, four legs) over a floor's upper voxel layer,
+    unlabelled, with a chair's r1 of 0.3 m and waves along surfaces of 2 point spacings first.
+    Reached across r1, the layer under the whole seat joined the chair (generator 5's meeting
+    room at 60k: 746 floor points made chair); as leaves along surfaces only the layer by the
+    legs' feet joins."""
+    seat = grid_patch((0.0, 0.5), (0.0, 0.5), z=0.45)
+    feet = np.array([(x, y) for x in (0.02, 0.48) for y in (0.02, 0.48)])
+    legs = [
+        np.column_stack([np.full(22, x), np.full(22, y), 0.02 + np.arange(22) * 0.02])
+        for x, y in feet
+    ]
+    layer = grid_patch((-0.3, 0.8), (-0.3, 0.8), z=0.01)
+    points = np.concatenate([seat, *legs, layer]).astype(np.float32)
+    n_chair = len(seat) + 4 * 22
+    labels = np.zeros(len(points), np.uint8)
+    labels[:n_chair] = Label.CHAIR
+    clusters = np.zeros(len(points), np.int32)
+    clusters[:n_chair] = 1
+    leaf = np.zeros(len(points), bool)
+    leaf[n_chair:] = True
+    kw = {"r1_m": {Label.CHAIR: 0.3}, "up": np.array([0.0, 0.0, 1.0]), "leaf": leaf}
+    on_layer = slice(n_chair, len(points))
+    near = np.linalg.norm(layer[:, None, :2] - feet[None], axis=2).min(axis=1)
+
+    across = regrow(points, labels, clusters, **kw)  # type: ignore[arg-type]
+    assert (across.labels[on_layer] == Label.CHAIR)[near > 0.1].sum() > 300
+    along = regrow(points, labels, clusters, surface_link=2.0, **kw)  # type: ignore[arg-type]
+    joined = along.labels[on_layer] == Label.CHAIR
+    assert joined.sum() >= 4 and (near[joined] <= 0.05).all()
+
+
 def test_refine_keeps_a_table_off_the_upper_layer_of_a_voxel_floor() -> None:
     """The same through `refine`: a floor the network leaves unlabelled (VOC), fused in two
     voxel layers (a quarter of it 1.2 cm up, round the table), which the floor's noise band

@@ -463,8 +463,10 @@ def test_the_wall_behind_a_plant_is_wall_even_on_a_noisy_wall() -> None:
     wall = _wall(0.0, (0.0, 4.0), 2.5, step=0.02)
     wall[:, 1] += rng.normal(0.0, 0.012, len(wall))
     leaves = rng.normal(size=(3000, 3))
-    leaves *= 0.3 * rng.uniform(0.0, 1.0, (3000, 1)) ** (1 / 3) / np.linalg.norm(
-        leaves, axis=1, keepdims=True
+    leaves *= (
+        0.3
+        * rng.uniform(0.0, 1.0, (3000, 1)) ** (1 / 3)
+        / np.linalg.norm(leaves, axis=1, keepdims=True)
     )
     leaves += [2.0, 0.3, 1.0]
     leaves = leaves[leaves[:, 1] > 0.0]
