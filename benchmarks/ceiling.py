@@ -19,12 +19,10 @@ from typing import Final
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS
 from process.evaluate import label_metrics
+from process.refine.graph import radius_components
 
 LINK_M: Final = 0.035  # points of one true class this near are one object (voxels up to 3 cm)
 
@@ -36,20 +34,12 @@ def majority_ceiling(
     link_m: float = LINK_M,
 ) -> float:
     """Return the pooled object F1 when every true object takes its majority phase-I label."""
-    objects = np.flatnonzero(np.isin(truth, OBJECT_LABELS))
     out = np.where(np.isin(truth, OBJECT_LABELS), labels, truth).astype(np.uint8)
-    if len(objects):
-        pairs = cKDTree(np.asarray(points[objects], np.float64)).query_pairs(
-            link_m, output_type="ndarray"
-        )
-        pairs = pairs[truth[objects[pairs[:, 0]]] == truth[objects[pairs[:, 1]]]]
-        graph = coo_matrix(
-            (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(objects),) * 2
-        )
-        _, component = connected_components(graph, directed=False)
-        for members in np.split(
-            objects[np.argsort(component)], np.cumsum(np.bincount(component))[:-1]
-        ):
+    for cls in np.intersect1d(truth, OBJECT_LABELS):
+        own = np.flatnonzero(truth == cls)
+        piece = radius_components(np.asarray(points[own], np.float64), link_m)
+        order = np.argsort(piece, kind="stable")
+        for members in np.split(own[order], np.cumsum(np.bincount(piece))[:-1]):
             voted = labels[members]
             voted = voted[np.isin(voted, OBJECT_LABELS)]
             if len(voted):

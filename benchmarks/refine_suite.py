@@ -177,7 +177,7 @@ def held_out() -> dict[str, Callable[[], Case]]:
 
 
 def _group(name: str) -> str:
-    """Return the line a cloud's figures are summed in: its generator, and size for g4 held out."""
+    """Return the line a cloud's figures are summed in: its generator (and size, held out)."""
     parts = name.split()
     sized = parts[0] in ("g4", "g5") and parts[1].endswith("k")
     return " ".join(parts[:2]) if sized else parts[0]

@@ -100,8 +100,8 @@ class RefineConfig:
     # between its back and front: a fused simulated map gained 0.049; objects.py); 0: off
     object_bridge_m: float = 0.5
     floor_leaf: bool = True  # unlabelled points on the floor plane join an object in regrowth
-    # but pass growth on to no other point, and only along surfaces (`regrow_surface_link`), not
-    # across r1 (regrowth.py); False: they relay it
+    # but pass growth on to no other point, and only along surfaces (`regrow_surface_link`; 0:
+    # within r1) (regrowth.py); False: they relay it
     sparse_clusters_yield: bool = True  # a cluster sparse at the paper's MinPts goes to 0
     # when its box overlaps a denser cluster of another class (lower_quartile keeps such)
     attach_small_clusters: bool = True  # a small cluster that close to a big one is kept
