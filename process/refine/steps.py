@@ -277,7 +277,7 @@ def refine(
         if cfg.lone_objects:  # what the network saw apart from every object, DBSCAN dropped
             labels_iii, clusters_iii, lone = lone_objects(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
-                min_points=cfg.min_cluster_points,
+                min_points=cfg.min_cluster_points, misnamed=planes.not_floor,
             )  # fmt: skip
             regrown = np.union1d(regrown, lone)  # shown with the regrown points too
         if cfg.rejoin_strays:  # sparse foliage SOR and DBSCAN took for noise, to its plant
@@ -323,6 +323,7 @@ def refine(
         vote = seam_vote(
             cloud.points, labels_iii, clusters_iii, seam_m=cfg.seam_vote_m,
             angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness, max_points=cfg.max_cells,
+            said=network,
         )  # fmt: skip
         labels_iii, seams, neighbours = vote.labels, vote.relabelled, vote.neighbours
         lap("seams")

@@ -64,6 +64,29 @@ def test_a_segment_the_network_left_unlabelled_stays_unlabelled() -> None:
     assert (out[back] == 0).all() and len(adopted) == 0
 
 
+def test_a_back_touching_at_a_corner_joins_only_the_class_the_network_said() -> None:
+    """A back (46 x 45 cm) 2 cm over the seat and shifted so only its corner comes within
+    reach: 3-9 contacts, all chair. Called chair by the network it joins the chair (rec seed
+    66: a chair's back, 7 contacts); called floor, with so few contacts, it stays unlabelled."""
+    seat = grid_patch((0.0, 0.45), (0.0, 0.45), z=0.45, step=STEP).astype(np.float64)
+    plate = grid_patch((0.47, 0.92), (0.43, 0.88), step=STEP).astype(np.float64)
+    back = np.column_stack([np.zeros(len(plate)), plate[:, 1], plate[:, 0]])
+    points = np.vstack([seat, back])
+    is_back = np.r_[np.zeros(len(seat), bool), np.ones(len(back), bool)]
+    labels, clusters = _phase_ii(is_back)
+    near = np.linalg.norm(back[:, None, :] - seat[None, :, :], axis=2).min(axis=1)
+    assert 3 <= (near < 2.5 * STEP).sum() < 10  # the corner only
+    rows = np.arange(len(points))
+    said = np.full(len(points), CHAIR, np.uint8)
+    said[np.flatnonzero(is_back)[::3]] = FLOOR  # a third of it floor: still most of it chair
+    out, ids, adopted = adopt_orphans(points, labels, clusters, rows, said)
+    assert (out[is_back] == CHAIR).all() and (ids[is_back] == 1).all()
+    assert np.array_equal(adopted, np.flatnonzero(is_back))
+    said[is_back] = FLOOR
+    out, _, adopted = adopt_orphans(points, labels, clusters, rows, said)
+    assert (out[is_back] == 0).all() and len(adopted) == 0
+
+
 def test_a_segment_touching_only_a_table_is_not_made_table() -> None:
     """What touches only a desk stands on it: a box on a desk the network called floor."""
     points, back = _chair()
@@ -143,6 +166,33 @@ def test_a_segment_touching_no_object_becomes_an_object_of_its_class() -> None:
         points, labels, clusters, np.arange(len(points)), said, min_points=30
     )
     assert (out[leg] == CHAIR).all() and len(made) == leg.sum()
+
+
+def test_a_lone_segment_half_called_floor_above_the_floor_becomes_its_object() -> None:
+    """A chair's leg the network called chair on 45 % of it and floor, 0-44 cm up, on the rest
+    (rec seed 71: a seat 85 chair, 90 floor labels): "floor" above the floor is a class that
+    cannot be right there, the network saw something, so the segment is seen and chair. Without
+    `misnamed` it is under half seen and stays unlabelled; "floor" on the floor stays unseen."""
+    points, leg = _seat_and_leg(1.5)
+    labels = np.where(leg, 0, CHAIR).astype(np.uint8)
+    clusters = np.where(leg, 0, 7).astype(np.int32)
+    rows = np.arange(len(points))
+    said = np.full(len(points), CHAIR, np.uint8)
+    floor_said = np.flatnonzero(leg)[np.arange(leg.sum()) % 20 < 11]  # 55 %
+    said[floor_said] = FLOOR
+    assert len(lone_objects(points, labels, clusters, rows, said, min_points=30)[2]) == 0
+    misnamed = np.zeros(len(points), bool)
+    misnamed[floor_said] = True
+    out, ids, made = lone_objects(
+        points, labels, clusters, rows, said, min_points=30, misnamed=misnamed
+    )
+    assert (out[leg] == CHAIR).all() and (ids[leg] == 8).all()
+    assert np.array_equal(made, np.flatnonzero(leg))
+    # all of it misnamed, no object label at all: no class to give it
+    said[leg] = FLOOR
+    misnamed[leg] = True
+    assert len(lone_objects(points, labels, clusters, rows, said, min_points=30,
+                            misnamed=misnamed)[2]) == 0  # fmt: skip
 
 
 def test_a_segment_that_is_small_mixed_unseen_or_touching_stays_unlabelled() -> None:
