@@ -8,10 +8,6 @@ lie in each other's tangent plane, both on locally flat ground (low surface vari
 surface does not creep round an arm or a bottle lying on a table). A point whose class is not
 its surface's majority, lying within `seam_vote_m` of a point of that majority class, takes it
 when:
-- where its class is the network's own for it: it lies on that class's own surface, within
-  `OFF_SURFACE` point spacings (at least `OFF_SURFACE_M`) of the tangent planes at its nearest
-  points of the class (a surface also creeps, over a fused map's rounded edges, from a desk
-  onto a box standing on it, whose top is no part of the desk),
 - the majority holds at least `MAJORITY` of the surface, and
 - its own cluster lies mostly elsewhere (a fringe of an object beyond this surface), not
   mostly on it (a book or a keyboard lying flat on a desk is an object of its own).
@@ -38,10 +34,6 @@ NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface va
 MAJORITY = 0.6  # a surface's class holds this share of its points
 FRINGE = 0.5  # a point flips only if less than this share of its cluster is on the surface
 MIN_SURFACE = 50  # points a surface needs to vote
-OFF_SURFACE = 1.0  # a point this many spacings (and OFF_SURFACE_M) off the tangent planes ...
-OFF_SURFACE_M = 0.01  # ... (a fused depth map's noise: a seated person's curved surface at 200k
-# object points is 0.5 cm apart, and its own points lie farther than that off their neighbours')
-TANGENT_NEIGHBOURS = 10  # ... at its nearest points of the majority class (the median)
 
 
 @dataclass(frozen=True)
@@ -65,7 +57,6 @@ def seam_vote(
     angle_deg: float,
     flatness: float,
     max_points: int = 400_000,
-    said: npt.NDArray[np.uint8] | None = None,
 ) -> SeamVote:
     """Relabel object points at class seams by the majority of the smooth surface they lie on.
 
@@ -79,9 +70,6 @@ def seam_vote(
         max_points: past this many object points the vote runs on the centroids of each
             class's points per voxel (the finest voxel giving about this many), and every
             point takes its centroid's verdict: the graph's memory stays bounded.
-        said: (N,) the network's labels (phase I): a point whose class is the one the network
-            gave it flips only on the majority's own surface (`OFF_SURFACE`); None: any point
-            on the surface within seam_m may flip.
     """
     out = labels.copy()
     objects = np.flatnonzero(np.isin(labels, OBJECT_LABELS))
@@ -92,15 +80,13 @@ def seam_vote(
         return SeamVote(out, np.zeros(0, np.intp))
     xyz = np.asarray(points[objects], np.float32)
     own, ids = labels[objects], clusters[objects]
-    seen = np.zeros(len(objects), bool) if said is None else said[objects] == own
     group = np.arange(len(objects))
     capped = len(objects) > max_points
     if capped:
         xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
-        seen = 2 * np.bincount(group, weights=seen) > np.bincount(group)  # most of the cell
     xyz64 = np.asarray(xyz, np.float64)
     neighbours = cKDTree(xyz64).query(xyz64, NEIGHBOURS + 1, workers=-1)
-    new = _vote(xyz64, own, ids, seen, neighbours, seam_m, angle_deg, flatness)[group]
+    new = _vote(xyz64, own, ids, neighbours, seam_m, angle_deg, flatness)[group]
     flip = new != labels[objects]
     out[objects[flip]] = new[flip]
     return SeamVote(out, objects[flip], None if capped else neighbours)
@@ -110,40 +96,21 @@ def _vote(
     xyz: npt.NDArray[np.float64],
     own: npt.NDArray[np.uint8],
     ids: npt.NDArray[np.int32],
-    seen: npt.NDArray[np.bool_],
     neighbours: tuple[npt.NDArray[np.float64], npt.NDArray[np.intp]],
     seam_m: float,
     angle_deg: float,
     flatness: float,
 ) -> npt.NDArray[np.uint8]:
-    """Return the labels after the vote, for points each of one class and one cluster.
-
-    `seen`: the points whose class is the network's own for them (the tangent test's).
-    """
-    surface, normals, spacing = _surfaces(xyz, neighbours, angle_deg=angle_deg, flatness=flatness)
+    """Return the labels after the vote, for points each of one class and one cluster."""
+    surface = _surfaces(xyz, neighbours, angle_deg=angle_deg, flatness=flatness)
     major, share, size = _majority(surface, own)
     candidate = (own != major[surface]) & (share[surface] >= MAJORITY)
     candidate &= (size[surface] >= MIN_SURFACE) & (_on_surface_share(ids, surface) < FRINGE)
     out = own.copy()
     for target in np.unique(major[surface][candidate]):
         rows = np.flatnonzero(candidate & (major[surface] == target))
-        held = np.flatnonzero(own == target)
-        tree = cKDTree(xyz[held])
-        near, _ = tree.query(xyz[rows], distance_upper_bound=seam_m)
-        rows = rows[np.isfinite(near)]
-        # what the network itself gave its class flips only on the majority's own surface:
-        # within OFF_SURFACE spacings of the tangent planes at its nearest points (the median).
-        # A surface creeps over a fused map's rounded edges onto a box standing on a desk, 2-14
-        # cm over the top (fresh recording 72: 99 points of a box the network called clutter
-        # made table); a label regrowth spread (a monitor's, onto a riser 4 cm over a desk the
-        # network called table: generator 1's office) may go wherever the surface goes
-        tested = rows[seen[rows]]
-        k = min(TANGENT_NEIGHBOURS, len(held))
-        _, at = tree.query(xyz[tested], k)
-        at = held[at.reshape(len(tested), k)]
-        off = np.abs(np.einsum("ikj,ikj->ik", xyz[tested][:, None, :] - xyz[at], normals[at]))
-        out[rows[~seen[rows]]] = target
-        out[tested[np.median(off, axis=1) < max(OFF_SURFACE * spacing, OFF_SURFACE_M)]] = target
+        near, _ = cKDTree(xyz[own == target]).query(xyz[rows], distance_upper_bound=seam_m)
+        out[rows[np.isfinite(near)]] = target
     return out
 
 
@@ -153,12 +120,8 @@ def _surfaces(
     *,
     angle_deg: float,
     flatness: float,
-) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64], float]:
-    """Return (surface id, normal) per point and the points' spacing.
-
-    A surface is a component of the graph of flat, coplanar neighbours; the spacing is the
-    median distance to the nearest other point.
-    """
+) -> npt.NDArray[np.int32]:
+    """Return a smooth-surface id per point: components of the flat, coplanar-neighbour graph."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
     search = o3d.geometry.KDTreeSearchParamKNN(NORMAL_NEIGHBOURS)
     cloud.estimate_covariances(search)
@@ -180,7 +143,7 @@ def _surfaces(
     ok &= np.abs((normals[near] * own).sum(axis=2)) > np.cos(np.radians(angle_deg))
     ok &= np.abs(((xyz[near] - xyz[rows][:, None, :]) * own).sum(axis=2)) < spacing  # tangent
     i = np.repeat(rows, np.count_nonzero(ok, axis=1))
-    return components(len(xyz), i, near[ok])[1], normals, spacing
+    return components(len(xyz), i, near[ok])[1]
 
 
 def _majority(

@@ -323,7 +323,6 @@ def refine(
         vote = seam_vote(
             cloud.points, labels_iii, clusters_iii, seam_m=cfg.seam_vote_m,
             angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness, max_points=cfg.max_cells,
-            said=network,
         )  # fmt: skip
         labels_iii, seams, neighbours = vote.labels, vote.relabelled, vote.neighbours
         lap("seams")

@@ -23,12 +23,11 @@ def _vote(
     *,
     flatness: float = 0.06,
     max_points: int = 400_000,
-    said: npt.NDArray[np.uint8] | None = None,
 ) -> seams.SeamVote:
     """The vote at the defaults of RefineConfig."""
     return seam_vote(
         points, labels, clusters, seam_m=0.08, angle_deg=15.0, flatness=flatness,
-        max_points=max_points, said=said,
+        max_points=max_points,
     )  # fmt: skip
 
 
@@ -145,41 +144,3 @@ def test_one_class_or_none_changes_nothing() -> None:
     for labels in (np.full(len(points), CHAIR), np.zeros(len(points))):
         vote = _vote(points, labels.astype(np.uint8), np.ones(len(points), np.int32))
         assert np.array_equal(vote.labels, labels) and len(vote.relabelled) == 0
-
-
-def _box_on_a_ramp() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], Points]:
-    """A desk and on it a box whose top the fused map's rounded edge joins to the desk: a ramp
-    at 8.5 degrees rising 3 cm over 20 cm, the box's top at 3 cm and its 70 cm back above it
-    (the box's cluster lies mostly off the desk's surface). Returns the top's mask last."""
-    desk = _plate((0.0, 1.2), (0.0, 0.6), 0.75)
-    desk = desk[~((desk[:, 0] >= 0.4) & (desk[:, 1] >= 0.2) & (desk[:, 1] < 0.4))]
-    ramp = _plate((0.4, 0.6), (0.2, 0.4), 0.75)
-    ramp[:, 2] += 0.15 * (ramp[:, 0] - 0.4)
-    top = _plate((0.6, 0.9), (0.2, 0.4), 0.78)
-    y, z = np.meshgrid(np.arange(0.2, 0.4, STEP), np.arange(0.79, 1.49, STEP))
-    back = np.column_stack([np.full(y.size, 0.9), y.ravel(), z.ravel()])
-    points = _noisy(np.vstack([desk, ramp, top, back]))
-    box = np.r_[np.zeros(len(desk), bool), np.ones(len(points) - len(desk), bool)]
-    on_top = np.zeros(len(points), bool)
-    on_top[len(desk) + len(ramp) : len(desk) + len(ramp) + len(top)] = True
-    labels = np.where(box, CLUTTER, TABLE).astype(np.uint8)
-    return points, labels, np.where(box, 2, 1).astype(np.int32), on_top
-
-
-def test_a_box_the_desks_surface_creeps_onto_keeps_its_top(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """The smooth surface runs from the desk up the ramp onto the box's top, 60 % and more
-    table. The network called the box clutter: only points on the desk's own tangent planes
-    may flip (fresh recording 72: 99 points of a box 2-8 cm over a desk were made table).
-    Without the test the top flips; so it does where clutter is no label of the network's
-    (regrowth's: a monitor's label spread onto a riser of the desk, generator 1's office)."""
-    points, labels, clusters, top = _box_on_a_ramp()
-    vote = _vote(points, labels, clusters, said=labels)
-    assert np.all(vote.labels[top] == CLUTTER)
-    assert np.all(vote.labels[labels == TABLE] == TABLE)
-    spread = np.where(top, TABLE, labels).astype(np.uint8)  # the network: the top is desk
-    assert np.sum(_vote(points, labels, clusters, said=spread).labels[top] == TABLE) > 300
-    monkeypatch.setattr(seams, "OFF_SURFACE", 100.0)
-    loose = _vote(points, labels, clusters, said=labels)
-    assert np.sum(loose.labels[top] == TABLE) > 300
