@@ -45,7 +45,9 @@ def test_follow_processes_every_frame_as_written_and_ends_with_the_capture(
     every_frame = tmp_path / "every_frame.toml"  # a loaded machine must not drop frames here
     every_frame.write_text("[follow]\nmax_lag_s = 0\n")
     follower = _follower(live, out, "--no-viz", "--config", str(every_frame))
-    writer = _writer(sim_recording, live, speed=0.5)  # 30 frames over 2 s of camera time
+    # 30 frames over 4 s: at 2 s a loaded machine's follower once first opened the file after the
+    # writer had finished it, and a finished recording is read as a file, not followed
+    writer = _writer(sim_recording, live, speed=0.25)
     assert writer.wait(timeout=120) == 0
     assert follower.wait(timeout=120) == 0
     metrics = json.loads((out / outputs.METRICS).read_text())
