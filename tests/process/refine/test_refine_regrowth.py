@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from helpers_refine import grid_patch, labelled
 
@@ -483,31 +484,42 @@ def test_floor_points_join_from_a_leg_but_relay_no_growth() -> None:
     its growth crept from the legs along the whole layer under it. As leaves the floor points
     join only within r1 of a leg."""
     top = grid_patch((0.0, 1.2), (0.0, 0.8), z=0.74)
-    legs = [
-        np.column_stack([np.full(37, x), np.full(37, y), np.arange(37) * 0.02])
-        for x in (0.02, 1.16)
-        for y in (0.02, 0.76)
-    ]
+    feet = np.array([(x, y) for x in (0.02, 1.16) for y in (0.02, 0.76)])
     layer = grid_patch((-0.2, 1.4), (-0.2, 1.0), z=0.01)
-    points = np.concatenate([top, *legs, layer]).astype(np.float32)
-    n_table = len(top) + 4 * 37
-    labels = np.zeros(len(points), np.uint8)
-    labels[:n_table] = Label.TABLE
-    clusters = np.zeros(len(points), np.int32)
-    clusters[:n_table] = 1
-    leaf = np.zeros(len(points), bool)
-    leaf[n_table:] = True
+    points, labels, clusters, leaf = _on_legs_over_a_layer(top, feet, 0.0, 37, layer, Label.TABLE)
     up = np.array([0.0, 0.0, 1.0])
-    on_layer = slice(n_table, len(points))
+    on_layer = slice(len(points) - len(layer), len(points))
 
     crept = regrow(points, labels, clusters, r1_m={Label.TABLE: 0.05}, up=up)
     assert (crept.labels[on_layer] == Label.TABLE).sum() > 2000  # the layer under the top
     held = regrow(points, labels, clusters, r1_m={Label.TABLE: 0.05}, up=up, leaf=leaf)
     joined = held.labels[on_layer] == Label.TABLE
     assert 0 < joined.sum() < 200
-    feet = np.array([(x, y) for x in (0.02, 1.16) for y in (0.02, 0.76)])
     near = np.linalg.norm(layer[:, None, :2] - feet[None], axis=2).min(axis=1)
     assert (near[joined] <= 0.05).all()  # only beside the legs
+
+
+def _on_legs_over_a_layer(
+    top: npt.NDArray[np.float32],
+    feet: npt.ArrayLike,
+    bottom: float,
+    steps: int,
+    layer: npt.NDArray[np.float32],
+    label: int,
+) -> tuple[
+    npt.NDArray[np.float32], npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.bool_]
+]:
+    """A top on legs (`steps` points 2 cm apart up from `bottom` at each foot), object 1 of
+    `label`, over an unlabelled floor layer; returns points, labels, clusters and the leaves."""
+    legs = [
+        np.column_stack([np.full(steps, x), np.full(steps, y), bottom + np.arange(steps) * 0.02])
+        for x, y in np.asarray(feet, float)
+    ]
+    points = np.concatenate([top, *legs, layer]).astype(np.float32)
+    n = len(points) - len(layer)
+    labels = np.where(np.arange(len(points)) < n, label, 0).astype(np.uint8)
+    clusters = (np.arange(len(points)) < n).astype(np.int32)
+    return points, labels, clusters, ~(np.arange(len(points)) < n)
 
 
 def test_floor_leaves_join_only_along_surfaces_not_across_r1() -> None:
@@ -518,19 +530,9 @@ def test_floor_leaves_join_only_along_surfaces_not_across_r1() -> None:
     legs' feet joins."""
     seat = grid_patch((0.0, 0.5), (0.0, 0.5), z=0.45)
     feet = np.array([(x, y) for x in (0.02, 0.48) for y in (0.02, 0.48)])
-    legs = [
-        np.column_stack([np.full(22, x), np.full(22, y), 0.02 + np.arange(22) * 0.02])
-        for x, y in feet
-    ]
     layer = grid_patch((-0.3, 0.8), (-0.3, 0.8), z=0.01)
-    points = np.concatenate([seat, *legs, layer]).astype(np.float32)
-    n_chair = len(seat) + 4 * 22
-    labels = np.zeros(len(points), np.uint8)
-    labels[:n_chair] = Label.CHAIR
-    clusters = np.zeros(len(points), np.int32)
-    clusters[:n_chair] = 1
-    leaf = np.zeros(len(points), bool)
-    leaf[n_chair:] = True
+    points, labels, clusters, leaf = _on_legs_over_a_layer(seat, feet, 0.02, 22, layer, Label.CHAIR)
+    n_chair = len(points) - len(layer)
     kw = {"r1_m": {Label.CHAIR: 0.3}, "up": np.array([0.0, 0.0, 1.0]), "leaf": leaf}
     on_layer = slice(n_chair, len(points))
     near = np.linalg.norm(layer[:, None, :2] - feet[None], axis=2).min(axis=1)
