@@ -147,6 +147,8 @@ class RefineConfig:
     # (legs.py)
     chair_seats: bool = True  # a low, level, seat-sized table cluster touching a chair is its
     # seat (legs.py)
+    table_tops: bool = True  # a chair, person or sofa cluster lying mostly on a table's top
+    # gives its points there to the table (tops.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
     # neighbours are at least this share objects is opened to regrowth (inside.py; 0: never)
     inside_objects_link: float = 3.0  # ... neighbours within this many object point spacings
@@ -201,6 +203,7 @@ class RefineConfig:
             "inside_objects_share": 0.0,
             "table_legs": False,
             "chair_seats": False,
+            "table_tops": False,
         }
         return cls(**{**paper, **overrides})
 

@@ -140,6 +140,7 @@ def refinement_metrics(
         "raised_relabelled": len(result.raised),
         "legs_relabelled": len(result.legs),
         "seats_relabelled": len(result.seats),
+        "tops_relabelled": len(result.tops),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
         "lone_objects": len(result.lone),

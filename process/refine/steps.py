@@ -30,6 +30,7 @@ from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
+from process.refine.tops import tops_called_seats
 from process.refine.walls import behind_walls, floor_said_low, main_floor
 
 logger = logging.getLogger(__name__)
@@ -102,6 +103,8 @@ class RefineResult:
     # input indices of unlabelled segments the network saw touching no object, made objects
     seats: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of low, level table clusters touching a chair made its seat (legs.py)
+    tops: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of table tops the network called chair, person or sofa, made table (tops.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -149,10 +152,11 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points the seam, piece, raised, legs and seats votes relabelled, by class."""
+        """Return the points the seam, piece, raised, legs, seats and tops votes relabelled."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
         votes = np.union1d(votes, self.seats)
+        votes = np.union1d(votes, self.tops)
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -317,6 +321,12 @@ def refine(
             planes.up,
         )  # fmt: skip
         lap("seats")
+    on_tops = np.zeros(0, np.intp)
+    if cfg.table_tops:
+        labels_iii, clusters_iii, on_tops = tops_called_seats(
+            cloud.points, labels_iii, clusters_iii, [top for _, top in tops]
+        )
+        lap("tops")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -343,7 +353,7 @@ def refine(
         behind_walls=n_behind, seams=seams, bare_faces=n_faces, faces_filled=filled,
         pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
-        seats=seats,
+        seats=seats, tops=on_tops,
     )  # fmt: skip
 
 
