@@ -149,6 +149,7 @@ class RefineConfig:
     # seat (legs.py)
     table_tops: bool = True  # a chair, person or sofa cluster lying mostly on a table's top
     # gives its points there to the table (tops.py)
+    flat_floor: bool = True  # an object cluster lying flat in the floor's band is floor (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
     # neighbours are at least this share objects is opened to regrowth (inside.py; 0: never)
     inside_objects_link: float = 3.0  # ... neighbours within this many object point spacings
@@ -204,6 +205,7 @@ class RefineConfig:
             "table_legs": False,
             "chair_seats": False,
             "table_tops": False,
+            "flat_floor": False,
         }
         return cls(**{**paper, **overrides})
 

@@ -141,6 +141,7 @@ def refinement_metrics(
         "legs_relabelled": len(result.legs),
         "seats_relabelled": len(result.seats),
         "tops_relabelled": len(result.tops),
+        "flat_on_floor": len(result.flat),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
         "lone_objects": len(result.lone),

@@ -20,6 +20,7 @@ from process.refine.cells import attached_clusters, capped_cells, sparse_inside_
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
+from process.refine.flat import flat_on_floor
 from process.refine.inside import structure_inside_objects
 from process.refine.legs import legs_under_tables, seats_called_table
 from process.refine.orphans import adopt_orphans, lone_objects
@@ -105,6 +106,8 @@ class RefineResult:
     # input indices of low, level table clusters touching a chair made its seat (legs.py)
     tops: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of table tops the network called chair, person or sofa, made table (tops.py)
+    flat: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of object clusters lying flat in the floor's band, made floor (flat.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -152,11 +155,11 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points the seam, piece, raised, legs, seats and tops votes relabelled."""
+        """Return the points every vote after regrowth relabelled (seams.py to flat.py)."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
         votes = np.union1d(votes, self.seats)
-        votes = np.union1d(votes, self.tops)
+        votes = np.union1d(votes, np.union1d(self.tops, self.flat))
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -327,6 +330,13 @@ def refine(
             cloud.points, labels_iii, clusters_iii, [top for _, top in tops]
         )
         lap("tops")
+    flat = np.zeros(0, np.intp)
+    if cfg.flat_floor and planes.up is not None:
+        labels_iii, clusters_iii, flat = flat_on_floor(
+            cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
+            planes.up,
+        )  # fmt: skip
+        lap("flat")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -353,7 +363,7 @@ def refine(
         behind_walls=n_behind, seams=seams, bare_faces=n_faces, faces_filled=filled,
         pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
-        seats=seats, tops=on_tops,
+        seats=seats, tops=on_tops, flat=flat,
     )  # fmt: skip
 
 
