@@ -304,7 +304,6 @@ def refine(
         floor_band = objects[low & np.isin(labels_iii[objects], OBJECT_LABELS)]
     lap("regrowth")
     raised, sunk, legs = np.zeros(0, np.intp), 0, np.zeros(0, np.intp)
-    seats = np.zeros(0, np.intp)
     tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
     if cfg.raised_vote and planes.up is not None:
         lifted = raised_off_tables(cloud.points, labels_iii, clusters_iii, tops, planes.up)
@@ -318,25 +317,25 @@ def refine(
             planes.up, network,
         )  # fmt: skip
         lap("legs")
-    if cfg.chair_seats and planes.up is not None:
-        labels_iii, clusters_iii, seats = seats_called_table(
-            cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
-            planes.up,
-        )  # fmt: skip
-        lap("seats")
+    # votes by a cloud's floor plane: seats called table (legs.py), objects flat on it (flat.py)
+    by_floor: dict[str, npt.NDArray[np.intp]] = {}
+    for step, rule, on in (
+        ("seats", seats_called_table, cfg.chair_seats),
+        ("flat", flat_on_floor, cfg.flat_floor),
+    ):
+        by_floor[step] = np.zeros(0, np.intp)
+        if on and planes.up is not None:
+            labels_iii, clusters_iii, by_floor[step] = rule(
+                cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
+                planes.up,
+            )  # fmt: skip
+            lap(step)
     on_tops = np.zeros(0, np.intp)
     if cfg.table_tops:
         labels_iii, clusters_iii, on_tops = tops_called_seats(
             cloud.points, labels_iii, clusters_iii, [top for _, top in tops]
         )
         lap("tops")
-    flat = np.zeros(0, np.intp)
-    if cfg.flat_floor and planes.up is not None:
-        labels_iii, clusters_iii, flat = flat_on_floor(
-            cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
-            planes.up,
-        )  # fmt: skip
-        lap("flat")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -363,7 +362,7 @@ def refine(
         behind_walls=n_behind, seams=seams, bare_faces=n_faces, faces_filled=filled,
         pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
-        seats=seats, tops=on_tops, flat=flat,
+        seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"],
     )  # fmt: skip
 
 
