@@ -63,8 +63,10 @@ def tops_called_seats(
     host = np.zeros(len(rows), np.int32)  # the table object each point lies near (0: none)
     table = np.flatnonzero((labels == Label.TABLE) & (clusters > 0))
     if len(table):
-        pts = np.asarray(points, np.float64)
-        dist, nearest = cKDTree(pts[table]).query(pts[rows], distance_upper_bound=JOIN_M)
+        tree = cKDTree(np.asarray(points[table], np.float64))
+        dist, nearest = tree.query(
+            np.asarray(points[rows], np.float64), distance_upper_bound=JOIN_M
+        )
         near = np.isfinite(dist)
         host[near] = clusters[table[nearest[near]]]
     next_id = int(clusters.max()) + 1
