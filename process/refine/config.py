@@ -150,6 +150,8 @@ class RefineConfig:
     table_tops: bool = True  # a chair, person or sofa cluster lying mostly on a table's top
     # gives its points there to the table (tops.py)
     flat_floor: bool = True  # an object cluster lying flat in the floor's band is floor (flat.py)
+    flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
+    # apart from every other object, is wall (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
     # neighbours are at least this share objects is opened to regrowth (inside.py; 0: never)
     inside_objects_link: float = 3.0  # ... neighbours within this many object point spacings
@@ -206,6 +208,7 @@ class RefineConfig:
             "chair_seats": False,
             "table_tops": False,
             "flat_floor": False,
+            "flat_walls": False,
         }
         return cls(**{**paper, **overrides})
 

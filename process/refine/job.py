@@ -142,6 +142,7 @@ def refinement_metrics(
         "seats_relabelled": len(result.seats),
         "tops_relabelled": len(result.tops),
         "flat_on_floor": len(result.flat),
+        "flat_on_walls": len(result.flat_walls),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
         "lone_objects": len(result.lone),

@@ -20,7 +20,7 @@ from process.refine.cells import attached_clusters, capped_cells, sparse_inside_
 from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
-from process.refine.flat import flat_on_floor
+from process.refine.flat import flat_on_floor, flat_on_walls
 from process.refine.inside import structure_inside_objects
 from process.refine.legs import legs_under_tables, seats_called_table
 from process.refine.orphans import adopt_orphans, lone_objects
@@ -32,7 +32,7 @@ from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
 from process.refine.tops import tops_called_seats
-from process.refine.walls import behind_walls, floor_said_low, main_floor
+from process.refine.walls import behind_walls, facing, floor_said_low, main_floor, wall_band
 
 logger = logging.getLogger(__name__)
 
@@ -108,6 +108,8 @@ class RefineResult:
     # input indices of table tops the network called chair, person or sofa, made table (tops.py)
     flat: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of object clusters lying flat in the floor's band, made floor (flat.py)
+    flat_walls: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of standing-class clusters lying flat on a wall, apart, made wall (flat.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -160,6 +162,7 @@ class RefineResult:
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
         votes = np.union1d(votes, self.seats)
         votes = np.union1d(votes, np.union1d(self.tops, self.flat))
+        votes = np.union1d(votes, self.flat_walls)
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -330,6 +333,20 @@ def refine(
                 planes.up,
             )  # fmt: skip
             lap(step)
+    on_walls = np.zeros(0, np.intp)
+    if cfg.flat_walls and planes.up is not None:
+        centre = cloud.points.mean(axis=0, dtype=np.float64)
+        walls = [
+            (model, wall_band(cloud.points, plane, model, cfg))
+            for plane in planes.planes
+            if plane.label == Label.WALL
+            for model in [facing(plane.model, centre)]
+        ]
+        labels_iii, clusters_iii, on_walls = flat_on_walls(
+            cloud.points, labels_iii, clusters_iii, walls,
+            None if floor is None else floor.model, planes.up,
+        )  # fmt: skip
+        lap("flat_walls")
     on_tops = np.zeros(0, np.intp)
     if cfg.table_tops:
         labels_iii, clusters_iii, on_tops = tops_called_seats(
@@ -362,7 +379,7 @@ def refine(
         behind_walls=n_behind, seams=seams, bare_faces=n_faces, faces_filled=filled,
         pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
-        seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"],
+        seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"], flat_walls=on_walls,
     )  # fmt: skip
 
 
