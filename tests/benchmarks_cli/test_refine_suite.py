@@ -94,8 +94,12 @@ def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
 
 def test_a_groups_line_counts_the_clouds_at_095_and_those_gaining_005() -> None:
     pairs = [(0.80, 0.96), (0.93, 0.96), (0.90, 0.94), (0.88, 0.955)]  # (phase I, phase III)
-    line = refine_suite._summary("rec", pairs)
+    line = refine_suite._summary("rec", [(i, iii, None) for i, iii in pairs])
     assert line == "rec: mean III 0.954, 3 of 4 >= 0.95, 2 >= I + 0.05"  # not 0.90 -> 0.94
+    # with --ceiling: the second cloud's ceiling is 0.04 over its phase I, +0.05 cannot be
+    ceilings = [0.99, 0.97, 0.98, 0.96]
+    line = refine_suite._summary("rec", [(*p, c) for p, c in zip(pairs, ceilings, strict=True)])
+    assert line.endswith("2 >= I + 0.05 (3 of 4 have a ceiling >= I + 0.05)")
 
 
 def _blobs() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
