@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from helpers_refine import grid_patch, labelled
 
 from capture.recording import Label
-from process.refine import RefineConfig, refine
+from process.cloud import LabelledCloud
+from process.refine import RefineConfig, RefineResult, refine
 from process.refine.flat import flat_on_floor, flat_on_walls
 from process.refine.job import refinement_metrics
 
@@ -77,13 +79,7 @@ def test_the_refinement_gives_a_floor_patch_called_table_back_to_the_floor() -> 
     assert np.isin(kept, result.flat).all()
     desk_points = np.arange(len(floor), len(points))
     assert (result.labels_iii[desk_points] == TABLE).mean() > 0.95
-    points_section = refinement_metrics(result, gt_cloud=None)["points"]
-    assert points_section["flat_on_floor"] == len(result.flat)
-    shown = {tuple(p) for p in result.seam_cloud().points.tolist()}  # the .rrd's votes entity
-    assert {tuple(p) for p in cloud.points[kept].tolist()} <= shown
-    off = refine(cloud, dataclasses.replace(RefineConfig(), flat_floor=False), up=UP)
-    assert (off.labels_iii[kept] == TABLE).all() and len(off.flat) == 0
-    assert not RefineConfig.paper().flat_floor
+    _counted_shown_and_switched_off(cloud, result, kept, "flat", "flat_on_floor", "flat_floor")
 
 
 def _on_wall(
@@ -158,10 +154,27 @@ def test_the_refinement_gives_a_wall_patch_called_chair_apart_from_the_chair_bac
     assert np.isin(kept, result.flat_walls).all()
     chair_points = np.arange(len(floor) + len(wall), len(points))
     assert (result.labels_iii[chair_points] == CHAIR).mean() > 0.95
-    points_section = refinement_metrics(result, gt_cloud=None)["points"]
-    assert points_section["flat_on_walls"] == len(result.flat_walls)
+    _counted_shown_and_switched_off(
+        cloud, result, kept, "flat_walls", "flat_on_walls", "flat_walls"
+    )
+
+
+def _counted_shown_and_switched_off(
+    cloud: LabelledCloud,
+    result: RefineResult,
+    kept: npt.NDArray[np.intp],
+    field: str,
+    metric: str,
+    switch: str,
+) -> None:
+    """The rule's points (`field` of the result) are counted in metrics.json (`metric`) and
+    shown with the votes in the .rrd; with the rule off (`switch`, off in `paper()`), the `kept`
+    points keep the class DBSCAN gave them and the rule moves nothing."""
+    moved = getattr(result, field)
+    assert refinement_metrics(result, gt_cloud=None)["points"][metric] == len(moved)
     shown = {tuple(p) for p in result.seam_cloud().points.tolist()}  # the .rrd's votes entity
     assert {tuple(p) for p in cloud.points[kept].tolist()} <= shown
-    off = refine(cloud, dataclasses.replace(RefineConfig(), flat_walls=False), up=UP)
-    assert (off.labels_iii[kept] == CHAIR).all() and len(off.flat_walls) == 0
-    assert not RefineConfig.paper().flat_walls
+    rule_off: dict[str, Any] = {switch: False}
+    off = refine(cloud, dataclasses.replace(RefineConfig(), **rule_off), up=UP)
+    assert (off.labels_iii[kept] == result.labels_ii[kept]).all() and len(getattr(off, field)) == 0
+    assert not getattr(RefineConfig.paper(), switch)
