@@ -32,7 +32,7 @@ from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
 from process.refine.tops import tops_called_seats
-from process.refine.walls import behind_walls, facing, floor_said_low, main_floor, wall_band
+from process.refine.walls import behind_walls, floor_said_low, main_floor, wall_bands
 
 logger = logging.getLogger(__name__)
 
@@ -335,15 +335,8 @@ def refine(
             lap(step)
     on_walls = np.zeros(0, np.intp)
     if cfg.flat_walls and planes.up is not None:
-        centre = cloud.points.mean(axis=0, dtype=np.float64)
-        walls = [
-            (model, wall_band(cloud.points, plane, model, cfg))
-            for plane in planes.planes
-            if plane.label == Label.WALL
-            for model in [facing(plane.model, centre)]
-        ]
         labels_iii, clusters_iii, on_walls = flat_on_walls(
-            cloud.points, labels_iii, clusters_iii, walls,
+            cloud.points, labels_iii, clusters_iii, wall_bands(cloud.points, planes.planes, cfg),
             None if floor is None else floor.model, planes.up,
         )  # fmt: skip
         lap("flat_walls")

@@ -368,6 +368,19 @@ def _wall_noise(
     return (median, width) if width > cfg.plane_distance_m else None
 
 
+def wall_bands(
+    points: npt.NDArray[np.float32], planes: tuple[Plane, ...], cfg: RefineConfig
+) -> list[tuple[npt.NDArray[np.float64], float]]:
+    """Return each wall's plane, signed towards the room's centre, with its band (`wall_band`)."""
+    centre = points.mean(axis=0, dtype=np.float64)
+    out = []
+    for plane in planes:
+        if plane.label == Label.WALL:
+            model = facing(plane.model, centre)
+            out.append((model, wall_band(points, plane, model, cfg)))
+    return out
+
+
 def main_floor(planes: tuple[Plane, ...]) -> Plane | None:
     """Return the floor plane with the most points of its own (None: no floor plane)."""
     return max(
