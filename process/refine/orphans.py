@@ -11,9 +11,11 @@ spacings), and a segment takes the class of the objects it touches when:
   network left unlabelled is furniture it has no class for, a cabinet beside a chair: without
   this test the synthetic office lost 0.044 F1, generator 5's office at 60k 0.074),
 - at least `MIN_CONTACT` of its points touch object points, and `SHARE` of those are of one
-  class (`FEW_CONTACTS` suffice where the network called most of the segment that class: a
-  chair's back touching its seat's cluster at a corner, 7 contacts, 59 of its 89 points called
-  chair, in a fresh recording), and
+  class (`FEW_CONTACTS`, a single one, suffice where the network called most of the segment
+  that class: a chair's back touching its seat's cluster at a corner, 7 contacts, 59 of its 89
+  points called chair, in a fresh recording; four pieces of 20-37 points touching a chair at
+  1-2 points, all chair, in four others; its "floor" above the floor counting as seen, as for
+  lone objects below: a chair's base with 49 such floor and 10 chair labels), and
 - that class is not table: what touches only a desk stands on it or under it (as in pieces.py).
 The segment joins the cluster its contacts touch most; its points count as regrown.
 
@@ -47,7 +49,7 @@ NEIGHBOURS = 8  # graph edges per unlabelled point
 LINK = 2.5  # unlabelled points within this many point spacings are one segment
 SAID = 0.5  # share of a segment's points the network labelled (any class; lone: an object class)
 MIN_CONTACT = 10  # points of a segment within LINK spacings of an object point ...
-FEW_CONTACTS = 3  # ... or this many, where the network called most of the segment that class
+FEW_CONTACTS = 1  # ... or this many, where the network called most of the segment that class
 SHARE = 0.95  # of a segment's contacts touch objects of the class it takes
 
 
@@ -57,6 +59,8 @@ def adopt_orphans(
     clusters: npt.NDArray[np.int32],
     rows: npt.NDArray[np.intp],
     said: npt.NDArray[np.uint8],
+    *,
+    misnamed: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
     """Return (labels, clusters, adopted rows): unlabelled segments given to the class they touch.
 
@@ -67,6 +71,9 @@ def adopt_orphans(
         rows: indices of the unlabelled points that may join an object (not structure, not an
             outlier, not kept out of regrowth).
         said: (N,) the network's labels (phase I, as recorded): 0 where it saw nothing.
+        misnamed: (N,) points whose network class cannot be right there (its "floor" above
+            the floor): where a segment has few contacts, they count as seen (as in
+            `lone_objects`) and its object labels name the class.
     """
     labels, clusters = labels.copy(), clusters.copy()
     found = _unlabelled_segments(points, labels, clusters, rows, FEW_CONTACTS)
@@ -84,7 +91,8 @@ def adopt_orphans(
         best = int(classes[np.argmax(counts)])
         if counts.max() < SHARE * len(contact) or best == Label.TABLE:
             continue
-        if len(contact) < MIN_CONTACT and _majority(said[rows[members]]) != best:
+        wrong = 0 if misnamed is None else int(misnamed[rows[members]].sum())
+        if len(contact) < MIN_CONTACT and _majority(said[rows[members]], wrong) != best:
             continue
         ids, id_counts = np.unique(clusters[contact[labels[contact] == best]], return_counts=True)
         labels[rows[members]] = best

@@ -281,8 +281,9 @@ def refine(
         regrown = np.union1d(regrown, filled)  # shown with the regrown points in the .rrd
         if cfg.orphan_adoption:  # what the network saw and phase II left unlabelled
             labels_iii, clusters_iii, orphans = adopt_orphans(
-                cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels
-            )
+                cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
+                misnamed=planes.not_floor,
+            )  # fmt: skip
             regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
         if cfg.lone_objects:  # what the network saw apart from every object, DBSCAN dropped
             labels_iii, clusters_iii, lone = lone_objects(
