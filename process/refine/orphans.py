@@ -11,7 +11,7 @@ spacings), and a segment takes the class of the objects it touches when:
   network left unlabelled is furniture it has no class for, a cabinet beside a chair: without
   this test the synthetic office lost 0.044 F1, generator 5's office at 60k 0.074),
 - at least `MIN_CONTACT` of its points touch object points, and `SHARE` of those are of one
-  class (`FEW_CONTACTS`, a single one, suffice where the network called most of the segment
+  class (fewer, down to a single one, suffice where the network called most of the segment
   that class: a chair's back touching its seat's cluster at a corner, 7 contacts, 59 of its 89
   points called chair, in a fresh recording; four pieces of 20-37 points touching a chair at
   1-2 points, all chair, in four others; its "floor" above the floor counting as seen, as for
@@ -48,8 +48,8 @@ from process.refine.graph import components, knn_edges, point_spacing
 NEIGHBOURS = 8  # graph edges per unlabelled point
 LINK = 2.5  # unlabelled points within this many point spacings are one segment
 SAID = 0.5  # share of a segment's points the network labelled (any class; lone: an object class)
-MIN_CONTACT = 10  # points of a segment within LINK spacings of an object point ...
-FEW_CONTACTS = 1  # ... or this many, where the network called most of the segment that class
+MIN_CONTACT = 10  # points of a segment within LINK spacings of an object point, or any
+# number where the network called most of the segment the class its contacts hold
 SHARE = 0.95  # of a segment's contacts touch objects of the class it takes
 
 
@@ -76,7 +76,7 @@ def adopt_orphans(
             `lone_objects`) and its object labels name the class.
     """
     labels, clusters = labels.copy(), clusters.copy()
-    found = _unlabelled_segments(points, labels, clusters, rows, FEW_CONTACTS)
+    found = _unlabelled_segments(points, labels, clusters, rows, 1)
     if found is None:
         return labels, clusters, np.zeros(0, np.intp)
     held, rows, segment, dist, nearest = found
@@ -85,15 +85,16 @@ def adopt_orphans(
     for seg in np.unique(segment[touching]):
         members = np.flatnonzero(segment == seg)
         contact = held[nearest[members[touching[members]]]]
-        if len(contact) < FEW_CONTACTS or np.mean(said[rows[members]] != 0) < SAID:
+        if np.mean(said[rows[members]] != 0) < SAID:  # every segment here has a contact
             continue
         classes, counts = np.unique(labels[contact], return_counts=True)
         best = int(classes[np.argmax(counts)])
         if counts.max() < SHARE * len(contact) or best == Label.TABLE:
             continue
-        wrong = 0 if misnamed is None else int(misnamed[rows[members]].sum())
-        if len(contact) < MIN_CONTACT and _majority(said[rows[members]], wrong) != best:
-            continue
+        if len(contact) < MIN_CONTACT:
+            wrong = 0 if misnamed is None else int(misnamed[rows[members]].sum())
+            if _majority(said[rows[members]], wrong) != best:
+                continue
         ids, id_counts = np.unique(clusters[contact[labels[contact] == best]], return_counts=True)
         labels[rows[members]] = best
         clusters[rows[members]] = ids[np.argmax(id_counts)]
