@@ -22,10 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
+from process.refine.graph import components, kd_tree
 from process.refine.selection import STABLE_RUN, plateau_choice, stable_choice, stable_run_closed
 
 logger = logging.getLogger(__name__)
@@ -68,7 +66,7 @@ class NeighbourTable:
 
     def __init__(self, points: npt.NDArray[np.floating], *, k_query: int) -> None:
         self.points = np.asarray(points, np.float64)
-        self.tree = cKDTree(self.points)
+        self.tree = kd_tree(self.points)
         n = len(self.points)
         q = min(n, k_query)
         dist, idx = self.tree.query(self.points, k=q, workers=-1)
@@ -142,16 +140,8 @@ class NeighbourTable:
         extra = self._saturated_pairs(core, k)
         if extra is not None:
             starts, cols = np.concatenate([starts, extra[0]]), np.concatenate([cols, extra[1]])
-            order = np.argsort(starts, kind="stable")
-            starts, cols = starts[order], cols[order]
-        # CSR straight from the row-grouped edges, flagged canonical so that SciPy skips sorting
-        # every row by column: connected components need neither sorted rows nor unique edges
-        indptr = np.zeros(n + 1, np.int64)
-        np.cumsum(np.bincount(starts, minlength=n), out=indptr[1:])
-        graph = csr_matrix((np.ones(len(cols)), cols, indptr), shape=(n, n))
-        graph.has_canonical_format = True
-        n_components, components = connected_components(graph, directed=True, connection="weak")
-        return int(n_components) - (n - len(rows)), components.astype(np.int64), core
+        n_components, ids = components(n, starts, cols)
+        return n_components - (n - len(rows)), ids.astype(np.int64), core
 
     def labels(self, k: int, min_pts: int) -> npt.NDArray[np.int64]:
         """Return DBSCAN labels at the k-th bound eps: 0..C-1 per cluster, -1 for noise."""
@@ -170,7 +160,7 @@ class NeighbourTable:
         full = np.flatnonzero(core & (self.last <= self.eps[k]))
         if len(full) < 2:
             return None
-        pairs = cKDTree(self.points[full]).query_pairs(self.eps[k], output_type="ndarray")
+        pairs = kd_tree(self.points[full]).query_pairs(self.eps[k], output_type="ndarray")
         return full[pairs[:, 0]], full[pairs[:, 1]]
 
     def _assign_border(

@@ -43,10 +43,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
+from process.refine.graph import kd_tree
 from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, plane_uv
 
 RIM_M = 0.05  # a face's rim: the points this close to it, not on it (enclosed_faces)
@@ -101,7 +101,7 @@ def enclosed_faces(
         )
         box[face] = False
         near = np.flatnonzero(box)
-        rim = near[np.isfinite(cKDTree(probe).query(points[near], distance_upper_bound=RIM_M)[0])]
+        rim = near[np.isfinite(kd_tree(probe).query(points[near], distance_upper_bound=RIM_M)[0])]
         counts = np.bincount(labels[rim], minlength=Label.TABLE + 1)
         top = int(np.argmax(counts[Label.TABLE :])) + Label.TABLE
         if len(rim) == 0 or counts[top] < cfg.bare_face_rim_share * len(rim):

@@ -32,9 +32,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
+from process.refine.graph import kd_tree
 from process.refine.regrowth import STANDING
 
 FLAT_M = 0.03  # the floor's band: height over the floor plane
@@ -118,7 +118,7 @@ def flat_on_walls(
     for c in np.flatnonzero(flat):  # a patch touching another object is that object's face
         own = pts[ids == c]
         near = np.all((xyz >= own.min(0) - APART_M) & (xyz <= own.max(0) + APART_M), axis=1)
-        hits = cKDTree(xyz[near]).query_ball_point(own, APART_M, return_sorted=False)
+        hits = kd_tree(xyz[near]).query_ball_point(own, APART_M, return_sorted=False)
         touched = clusters[objects[near][np.unique(np.concatenate(hits).astype(np.intp))]]
         flat[c] = bool((touched == c).all())
     chosen = flat[ids]

@@ -8,11 +8,23 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 SPACING_SAMPLE = 20_000  # points whose nearest neighbour gives the point spacing
+
+
+def kd_tree(points: npt.ArrayLike) -> cKDTree:
+    """Return SciPy's k-d tree of the points, split at sliding midpoints and left uncompacted.
+
+    Every neighbour search of the refinement goes through one of these. SciPy's default (median
+    splits, shrunk boxes) builds a balanced tree for adversarial data; a map's points are not,
+    and on the 332k office this tree builds in 0.04 s instead of 0.11 s and answers an 11-NN
+    query of every point in 0.41 s instead of 0.58 s. Queries are exact either way: the same
+    neighbours, the same distances (the refinement's labels were compared point for point).
+    """
+    return cKDTree(points, balanced_tree=False, compact_nodes=False)
 
 
 def point_spacing(
@@ -25,7 +37,7 @@ def point_spacing(
     """
     if len(points) < 2:
         return 0.0
-    tree = cKDTree(np.asarray(points, np.float64)) if tree is None else tree
+    tree = kd_tree(np.asarray(points, np.float64)) if tree is None else tree
     probe = np.asarray(points[:: max(1, len(points) // sample)], np.float64)
     return float(np.median(tree.query(probe, 2)[0][:, 1]))
 
@@ -39,17 +51,32 @@ def knn_edges(
 
 
 def components(
-    n: int, i: npt.NDArray[np.intp], j: npt.NDArray[np.intp]
+    n: int, i: npt.NDArray[np.integer], j: npt.NDArray[np.integer]
 ) -> tuple[int, npt.NDArray[np.int32]]:
-    """Return (count, component id per node) of the undirected graph of n nodes, edges i-j."""
-    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    count, ids = connected_components(graph.tocsr(), directed=False)
+    """Return (count, component id per node) of the undirected graph of n nodes, edges i-j.
+
+    Ids are numbered by each component's lowest node, whatever the order of the edges. The
+    sparse matrix is built as CSR straight from the edges grouped by `i` (k-NN edges come
+    grouped; others are sorted here) and flagged canonical: connected components need neither
+    sorted columns nor unique edges, so SciPy's COO conversion, duplicate summing and column
+    sort are skipped, and weak components of the directed graph are the undirected ones
+    without a symmetrised copy (0.04 s -> 0.015 s on 160k points and 670k edges).
+    """
+    i, j = np.asarray(i), np.asarray(j)
+    if len(i) > 1 and bool(np.any(i[1:] < i[:-1])):
+        order = np.argsort(i, kind="stable")
+        i, j = i[order], j[order]
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(i, minlength=n), out=indptr[1:])
+    graph = csr_matrix((np.ones(len(j)), j, indptr), shape=(n, n))
+    graph.has_canonical_format = True
+    count, ids = connected_components(graph, directed=True, connection="weak")
     return int(count), np.asarray(ids, np.int32)
 
 
 def radius_components(points: npt.NDArray[np.floating], radius: float) -> npt.NDArray[np.int32]:
     """Return a component id per point: the components of the graph of pairs within `radius`."""
-    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    pairs = kd_tree(points).query_pairs(radius, output_type="ndarray")
     return components(len(points), pairs[:, 0], pairs[:, 1])[1]
 
 

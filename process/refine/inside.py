@@ -29,10 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, STRUCTURAL_LABELS, Label
-from process.refine.graph import point_spacing, radius_components
+from process.refine.graph import kd_tree, point_spacing, radius_components
 
 _PROBE = 300  # points of a cluster whose neighbourhoods are looked at (an even sample)
 _OPENED = (Label.FLOOR, Label.WALL)  # structure labels a segment inside objects may carry
@@ -65,7 +64,7 @@ def structure_inside_objects(
     if len(structure) + len(dropped) == 0 or not objects.any():
         return np.zeros(0, np.intp)
     radius = link * point_spacing(points[objects])
-    tree = cKDTree(points)
+    tree = kd_tree(points)
     ids = clusters.copy()
     if len(dropped):
         ids[dropped] = int(clusters.max()) + 1 + radius_components(points[dropped], radius)

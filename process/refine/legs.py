@@ -52,7 +52,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import point_spacing, radius_components
+from process.refine.graph import kd_tree, point_spacing, radius_components
 from process.refine.plane_grid import over_footprint, plane_uv
 
 CELL_M = 0.05  # footprint grid of the top
@@ -144,7 +144,7 @@ def legs_under_tables(
             continue
         host = int(np.bincount(table).argmax())
         host_points = pts[out_clusters == host]
-        host_tree = cKDTree(host_points)
+        host_tree = kd_tree(host_points)
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
         under = _Under(pts, out_labels, out_clusters, offset, top, model)
@@ -269,7 +269,7 @@ def seats_called_table(
     seats = np.unique(clusters[tables[height <= SEAT_M]])
     if len(seats) == 0:
         return out_labels, out_clusters, none
-    chair_tree = cKDTree(pts[chair])
+    chair_tree = kd_tree(pts[chair])
     link = LINK * point_spacing(pts[chair], chair_tree)
     changed = []
     for seat in seats:

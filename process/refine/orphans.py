@@ -40,10 +40,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import components, knn_edges, point_spacing
+from process.refine.graph import components, kd_tree, knn_edges, point_spacing
 
 NEIGHBOURS = 8  # graph edges per unlabelled point
 LINK = 2.5  # unlabelled points within this many point spacings are one segment
@@ -184,7 +183,7 @@ def _unlabelled_segments(
     rows = rows[labels[rows] == 0]
     if len(rows) < fewest or len(held) < 2:
         return None
-    objects = cKDTree(np.asarray(points[held], np.float64))
+    objects = kd_tree(np.asarray(points[held], np.float64))
     link = LINK * point_spacing(points[held], objects)
     xyz = np.asarray(points[rows], np.float64)
     dist, nearest = objects.query(xyz, distance_upper_bound=link, workers=-1)
@@ -194,6 +193,6 @@ def _unlabelled_segments(
 def _segments(xyz: npt.NDArray[np.float64], link: float) -> npt.NDArray[np.int32]:
     """Return a segment id per point: components of the graph of neighbours within link."""
     k = min(NEIGHBOURS + 1, len(xyz))
-    i, j, length = knn_edges(*cKDTree(xyz).query(xyz, k, distance_upper_bound=link, workers=-1))
+    i, j, length = knn_edges(*kd_tree(xyz).query(xyz, k, distance_upper_bound=link, workers=-1))
     ok = np.isfinite(length)
     return components(len(xyz), i[ok], j[ok])[1]

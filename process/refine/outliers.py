@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import Label
-from process.refine.graph import point_spacing, radius_components
+from process.refine.graph import kd_tree, point_spacing, radius_components
 from process.refine.regrowth import frame
 
 LINK = 2.0  # a stray with another plant-labelled point this many point spacings away is a leaf
@@ -72,7 +71,7 @@ def rejoin_strays(
     mine = waiting = strays[network[strays] == plant]
     if plant not in r1_m or len(waiting) == 0:
         return np.zeros(0, np.intp)
-    tree = cKDTree(points[network == plant])
+    tree = kd_tree(points[network == plant])
     spacing = point_spacing(tree.data, tree, sample=_PROBES)
     company = tree.query(points[waiting], 2, distance_upper_bound=LINK * spacing)[0]
     waiting = waiting[np.isfinite(company[:, 1])]  # the stray itself is its first neighbour
@@ -109,7 +108,7 @@ def _waves(
     for _ in range(max_waves):
         if len(hosts) == 0 or len(waiting) == 0:
             break
-        distance, nearest = cKDTree(points[hosts]).query(points[waiting], distance_upper_bound=r1_m)
+        distance, nearest = kd_tree(points[hosts]).query(points[waiting], distance_upper_bound=r1_m)
         hit = np.isfinite(distance)
         if not hit.any():
             break

@@ -43,11 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
 from process.refine.cells import class_cells
-from process.refine.graph import class_pieces
+from process.refine.graph import class_pieces, kd_tree
 
 NEIGHBOURS = 10  # graph edges per point
 LINK = 2.5  # points of one class within this many point spacings are one piece
@@ -104,7 +103,7 @@ def piece_vote(
     xyz64 = np.asarray(xyz, np.float64)
     k = min(NEIGHBOURS, len(xyz64) - 1)
     if neighbours is None or len(neighbours[0]) != len(xyz64) or neighbours[0].shape[1] <= k:
-        neighbours = cKDTree(xyz64).query(xyz64, k + 1, workers=-1)
+        neighbours = kd_tree(xyz64).query(xyz64, k + 1, workers=-1)
     dist, nb = neighbours[0][:, : k + 1], neighbours[1][:, : k + 1]
     first = _vote(xyz64, own, ids, dist, nb)
     # the second pass sees the faces the first gave back (the module's docstring)
@@ -186,7 +185,7 @@ def _between(
     low, high = face.min(axis=0) - GAP_M, face.max(axis=0) + GAP_M
     around = np.all((xyz >= low) & (xyz <= high), axis=1)
     around[rows] = False
-    tree = cKDTree(face)
+    tree = kd_tree(face)
     sides = []
     for members in (own_class & around, other_class & around):
         pts = xyz[members]

@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 from capture.recording import OBJECT_LABELS, Label
 from process.refine.config import RefineConfig
+from process.refine.graph import kd_tree
 from process.refine.gravity import gravity
 from process.refine.plane_grid import (
     PIECE_CELL_M,
@@ -154,10 +155,9 @@ def min_plane_points(
     """
     if len(points) < 3:
         return max(cfg.plane_min_points, 3), math.nan
-    from scipy.spatial import cKDTree
 
     probe = points[rng.choice(len(points), min(2000, len(points)), replace=False)]
-    counts = cKDTree(points).query_ball_point(probe, _DENSITY_RADIUS_M, return_length=True)
+    counts = kd_tree(points).query_ball_point(probe, _DENSITY_RADIUS_M, return_length=True)
     density = float(np.mean(counts) / (math.pi * _DENSITY_RADIUS_M**2))
     if cfg.plane_min_points:
         return cfg.plane_min_points, density

@@ -40,11 +40,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
-from scipy.spatial import cKDTree
 from scipy.stats import median_abs_deviation
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import class_pieces
+from process.refine.graph import class_pieces, kd_tree
 from process.refine.plane_grid import PIECE_CELL_M, connected_pieces, grid_of, plane_uv
 
 NEIGHBOURS = 10  # graph edges per point
@@ -154,7 +153,7 @@ def _above(
         own = offset[members].astype(np.float64)
         xyz = np.asarray(points[members], np.float64)
         probe = np.linspace(0, len(members) - 1, min(len(members), SIGMA_PROBES)).astype(np.intp)
-        _, near = cKDTree(xyz).query(xyz[probe], NEIGHBOURS + 1)
+        _, near = kd_tree(xyz).query(xyz[probe], NEIGHBOURS + 1)
         local = own[probe] - np.median(own[near], axis=1)
         sigma = float(median_abs_deviation(local, scale="normal"))
         top = float(np.percentile(own, 75))
@@ -219,7 +218,7 @@ def _vote(
     table = labels == Label.TABLE
     if table.sum() < MIN_POINTS or table.all() or len(xyz) <= NEIGHBOURS:
         return []
-    dist, nb = cKDTree(xyz).query(xyz, NEIGHBOURS + 1, workers=-1)
+    dist, nb = kd_tree(xyz).query(xyz, NEIGHBOURS + 1, workers=-1)
     i, j, _, piece = class_pieces(dist, nb, labels, LINK)  # pieces of one class
     # contacts of table pieces with other classes' points
     contact = table[i] & ~table[j]

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
+
+from process.refine.graph import kd_tree
 
 _CHUNK = 64  # hypotheses scored per product: a (64 x points) float32 block, 5 MB at 20k
 _PRE_POINTS = 2000  # a sample of this many points or more scores its hypotheses preemptively
@@ -89,7 +90,7 @@ def local_planes(
         return np.zeros((0, 4))
     k = min(neighbours, len(sample))
     seeds = rng.choice(len(sample), min(count, len(sample)), replace=False)
-    _, near = cKDTree(sample).query(sample[seeds], k=k)
+    _, near = kd_tree(sample).query(sample[seeds], k=k)
     local = sample[near.reshape(len(seeds), k)].astype(np.float64)  # (H, k, 3)
     centroid = local.mean(axis=1)
     centred = local - centroid[:, None, :]

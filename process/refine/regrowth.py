@@ -25,10 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import Label
-from process.refine.graph import point_spacing
+from process.refine.graph import kd_tree, point_spacing
 from process.refine.objects import group_objects
 
 _CANDIDATES = 8  # frontier points examined per unlabelled point and wave, nearest first
@@ -422,7 +421,7 @@ def _adopt(
         if per_object[table.object[host]] < ratio * own:
             continue
         host_points = points[np.isin(clusters, ids[table.object == table.object[host]])]
-        near, _ = cKDTree(host_points).query(
+        near, _ = kd_tree(host_points).query(
             points[clusters == ids[row]], distance_upper_bound=2 * table.r1[host]
         )
         touching = float(np.mean(near <= table.r1[host] / 2))
@@ -449,7 +448,7 @@ def _wave(
     """
     k = min(_CANDIDATES, len(frontier))
     reach = min(float(table.r1.max()), step)
-    distance, nearest = cKDTree(points[frontier]).query(
+    distance, nearest = kd_tree(points[frontier]).query(
         points[open_], k=k, distance_upper_bound=reach, workers=-1
     )
     distance, nearest = distance.reshape(len(open_), k), nearest.reshape(len(open_), k)

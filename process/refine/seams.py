@@ -23,11 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 import open3d as o3d
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS
 from process.refine.cells import class_cells
-from process.refine.graph import components
+from process.refine.graph import components, kd_tree
 
 NEIGHBOURS = 10  # graph edges per point
 NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface variation)
@@ -85,7 +84,7 @@ def seam_vote(
     if capped:
         xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
     xyz64 = np.asarray(xyz, np.float64)
-    neighbours = cKDTree(xyz64).query(xyz64, NEIGHBOURS + 1, workers=-1)
+    neighbours = kd_tree(xyz64).query(xyz64, NEIGHBOURS + 1, workers=-1)
     new = _vote(xyz64, own, ids, neighbours, seam_m, angle_deg, flatness)[group]
     flip = new != labels[objects]
     out[objects[flip]] = new[flip]
@@ -109,7 +108,7 @@ def _vote(
     out = own.copy()
     for target in np.unique(major[surface][candidate]):
         rows = np.flatnonzero(candidate & (major[surface] == target))
-        near, _ = cKDTree(xyz[own == target]).query(xyz[rows], distance_upper_bound=seam_m)
+        near, _ = kd_tree(xyz[own == target]).query(xyz[rows], distance_upper_bound=seam_m)
         out[rows[np.isfinite(near)]] = target
     return out
 

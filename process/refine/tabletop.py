@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from capture.recording import Label
+from process.refine.graph import kd_tree
 from process.refine.regrowth import frame, table_tops
 
 _BELOW_TOP_M = 0.03  # a group's foot may sink this far into the top (plane noise)
@@ -62,7 +62,7 @@ def tabletop_objects(
         if label not in r1_m:
             continue
         members = open_[prior[open_] == label]
-        tree = cKDTree(xyz[members])
+        tree = kd_tree(xyz[members])
         graph = tree.sparse_distance_matrix(tree, r1_m[label] / 2, output_type="coo_matrix")
         _, group = connected_components(graph, directed=False)
         for g in np.flatnonzero(np.bincount(group) >= min_points):

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
+from process.refine.graph import kd_tree
 
 TOP_SHARE = 0.5  # of a cluster's points on a table's top
 TABLE_SHARE = 0.5  # a top is a table's where table holds over this share of its object points
@@ -63,7 +63,7 @@ def tops_called_seats(
     host = np.zeros(len(rows), np.int32)  # the table object each point lies near (0: none)
     table = np.flatnonzero((labels == Label.TABLE) & (clusters > 0))
     if len(table):
-        tree = cKDTree(np.asarray(points[table], np.float64))
+        tree = kd_tree(np.asarray(points[table], np.float64))
         dist, nearest = tree.query(
             np.asarray(points[rows], np.float64), distance_upper_bound=JOIN_M
         )

@@ -79,11 +79,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 from scipy.stats import median_abs_deviation
 
 from capture.recording import Label
 from process.refine.config import RefineConfig
+from process.refine.graph import kd_tree
 from process.refine.plane_grid import grid_of, over_footprint, plane_uv
 from process.refine.regrowth import STANDING
 
@@ -502,7 +502,7 @@ def walls_behind_objects(
             out.append(plane)
             continue
         # nearer the wall than the layer before it: the sofa's back in a noisy band stays
-        _, near = cKDTree(uv_front).query(uv_rest[behind], min(FRONT_NEIGHBOURS, len(front)))
+        _, near = kd_tree(uv_front).query(uv_rest[behind], min(FRONT_NEIGHBOURS, len(front)))
         level = np.median(front_depth[near.reshape(int(behind.sum()), -1)], axis=1)
         behind[behind] = depth[behind] < (middle + level) / 2
         taken = rest[behind]

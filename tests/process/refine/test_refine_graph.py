@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from process.refine.graph import components, knn_edges, radius_components
+from process.refine.graph import components, kd_tree, knn_edges, radius_components
 
 
 def test_knn_edges_leave_out_each_point_itself() -> None:
@@ -23,6 +23,40 @@ def test_components_join_chains_either_way_and_keep_lone_nodes() -> None:
     assert len({ids[0], ids[3], ids[5]}) == 3
     assert ids.dtype == np.int32
     assert components(3, np.zeros(0, np.intp), np.zeros(0, np.intp))[0] == 3
+
+
+def test_components_do_not_depend_on_the_order_of_the_edges() -> None:
+    """Edges given in any order, either way round, repeated or looping: the same ids, numbered
+    by each component's lowest node (the refinement's steps rely on stable ids)."""
+    i = np.array([7, 3, 5, 0, 3, 6, 6, 2])
+    j = np.array([6, 5, 8, 2, 5, 7, 6, 0])  # 3-5 twice, 6-6 a loop
+    count, ids = components(9, i, j)
+    assert count == 5  # {0, 2}, {1}, {3, 5, 8}, {4}, {6, 7}
+    assert ids.tolist() == [0, 1, 0, 2, 3, 2, 4, 4, 2]
+    order = np.random.default_rng(0).permutation(len(i))
+    assert components(9, j[order], i[order])[1].tolist() == ids.tolist()
+
+
+def test_kd_tree_finds_the_neighbours_of_scipys_default_tree() -> None:
+    """The fast-building tree answers every query the refinement asks exactly as SciPy's
+    default (balanced, compact) tree: k-NN with and without a bound, balls, pairs."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(1)
+    points = np.concatenate([rng.random((3000, 3)), rng.random((1000, 3)) * [1, 1, 0]])
+    ours, ref = kd_tree(points), cKDTree(points)
+    for kwargs in ({"k": 11}, {"k": 4, "distance_upper_bound": 0.03}):
+        d, n = ours.query(points[::7], **kwargs)
+        d_ref, n_ref = ref.query(points[::7], **kwargs)
+        np.testing.assert_array_equal(d, d_ref)
+        np.testing.assert_array_equal(n, n_ref)
+    counts = ours.query_ball_point(points[::5], 0.05, return_length=True)
+    np.testing.assert_array_equal(
+        counts, ref.query_ball_point(points[::5], 0.05, return_length=True)
+    )
+    pairs = ours.query_pairs(0.02, output_type="ndarray")
+    pairs_ref = ref.query_pairs(0.02, output_type="ndarray")
+    assert sorted(map(tuple, pairs.tolist())) == sorted(map(tuple, pairs_ref.tolist()))
 
 
 def test_class_pieces_link_one_label_within_the_spacing_bound() -> None:
