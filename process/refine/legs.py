@@ -10,6 +10,11 @@ does not stand in a table's footprint reaching exactly up to its top: a chair pu
 table leaves its back outside or rises above the top, a stool stays well under it. A chair
 cluster is a leg of the table when
 - `INSIDE` of its points lie over the top's footprint (its `CELL_M` cells and their neighbours),
+- its centre in plan lies under the top's outline (the convex hull of the top's points in plan):
+  the footprint's margin of one cell let a chair's leg pass that stood beside a desk's front
+  edge, its centre 4 and 26 mm outside the top (fresh recordings 69 and 71, 111 and 70 points;
+  the legs taken on the 32 fresh recordings 60-91 and the 152 held-out clouds stand 9-600 mm
+  inside it),
 - none rises above the top's band,
 - it is thin in plan, as a leg is: its points spread at most `THIN_M` (one standard deviation)
   in every direction (the recordings' legs 2-6 cm; a chair's seat 10-17 cm: on generators 2
@@ -31,11 +36,12 @@ cluster is a leg of the table when
 It then takes the table's label and object. So does a post the network called table that
 DBSCAN dropped as noise and regrowth did not reach (a leg between a fused map's gaps, 15-55 cm up
 and 12-20 cm short of its top: fresh recordings 40 and 44, 122-127 points; given `prior`): thin,
-over the footprint, its highest point within `POST_UPPER_M` under the top, a prism `POST_TALL`
-times as tall as it is wide, with nothing of another object above it. A bin's side under a desk
-that the network called table (fresh recording 45: 62 points, 25 cm tall) ends too far under the
-top, a box's face is no post. Written here because no library relabels by such a
-footprint test; the footprint grid is the raised vote's (`plane_grid`).
+over the footprint and under the outline, its highest point within `POST_UPPER_M` under the top,
+a prism `POST_TALL` times as tall as it is wide, with nothing of another object above it. A
+bin's side under a desk that the network called table (fresh recording 45: 62 points, 25 cm
+tall) ends too far under the top, a box's face is no post. Written here because no library
+relabels by such a footprint test; the footprint grid is the raised vote's (`plane_grid`), the
+outline SciPy's convex hull.
 
 Seats (`seats_called_table`): a table cluster that is a level sheet (at most `SHEET_M` thick)
 no higher than `SEAT_M` over the floor plane and at most `SEAT_MAX_M` across, touching a chair
@@ -49,7 +55,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
 from process.refine.graph import kd_tree, point_spacing, radius_components
@@ -94,6 +100,25 @@ def _prism(heights: npt.NDArray[np.float32], uv: npt.NDArray[np.float32]) -> boo
         if in_slice.sum() >= 5:
             widths.append(_spread(uv[in_slice]))
     return len(widths) >= 3 and max(widths) <= PRISM * float(np.median(widths))
+
+
+def _outline(uv: npt.NDArray[np.float32]) -> npt.NDArray[np.float64] | None:
+    """Return the half-planes (a, b, c; inside: a u + b v + c <= 0) of the points' convex hull.
+
+    None when the points span no area (fewer than three, or on a line).
+    """
+    try:
+        return np.asarray(ConvexHull(np.asarray(uv, np.float64)).equations, np.float64)
+    except (QhullError, ValueError):
+        return None
+
+
+def _under_outline(outline: npt.NDArray[np.float64] | None, uv: npt.NDArray[np.float32]) -> bool:
+    """Return whether the points' centre in plan lies within the outline (none: no)."""
+    if outline is None:
+        return False
+    centre = np.asarray(uv, np.float64).mean(axis=0)
+    return bool(np.all(outline[:, :2] @ centre + outline[:, 2] <= 0.0))
 
 
 def _touches(xyz: npt.NDArray[np.float32], tree: cKDTree, link: float) -> bool:
@@ -147,6 +172,7 @@ def legs_under_tables(
         host_tree = kd_tree(host_points)
         link = LINK * point_spacing(host_points, host_tree)
         uv_top = plane_uv(pts[surface], model)
+        outline = _outline(uv_top)
         under = _Under(pts, out_labels, out_clusters, offset, top, model)
         for k in candidates[sizes[candidates] < len(host_points)]:
             members = groups[k]
@@ -154,6 +180,8 @@ def legs_under_tables(
             if _spread(uv) > THIN_M:  # a seat: a chair pushed right under the table
                 continue
             if over_footprint(uv_top, uv, CELL_M, diagonal=True).mean() < INSIDE:
+                continue
+            if not _under_outline(outline, uv):  # a chair's leg beside the top's edge
                 continue
             reaches = highest[k] >= top - REACH_M or _touches(pts[members], host_tree, link)
             if not reaches:
@@ -174,6 +202,7 @@ def legs_under_tables(
             if (
                 _spread(uv) > THIN_M
                 or over_footprint(uv_top, uv, CELL_M, diagonal=True).mean() < INSIDE
+                or not _under_outline(outline, uv)
             ):
                 continue
             height = above_floor[members]
