@@ -109,7 +109,7 @@ def _outline(uv: npt.NDArray[np.float32]) -> npt.NDArray[np.float64] | None:
     """
     try:
         return np.asarray(ConvexHull(np.asarray(uv, np.float64)).equations, np.float64)
-    except (QhullError, ValueError):
+    except QhullError:
         return None
 
 

@@ -127,6 +127,19 @@ def test_a_chair_leg_beside_the_top_s_edge_is_no_leg() -> None:
         assert (out[len(points) :] == expected).all(), centre_y
 
 
+def test_a_top_of_no_area_holds_no_leg() -> None:
+    """A "top" whose points lie on one line (a strip one point wide) has no outline: Qhull
+    cannot draw it, and the rule takes no leg under it instead of failing."""
+    strip = np.column_stack([np.arange(0.0, 1.2, 0.01), np.full(120, 0.4), np.full(120, 0.73)])
+    leg = _column(0.5, 0.385, (0.0, 0.72))  # right under the strip, reaching it
+    points = np.concatenate([strip, leg]).astype(np.float32)
+    labels = np.r_[np.full(len(strip), TABLE, np.uint8), np.full(len(leg), CHAIR, np.uint8)]
+    clusters = np.r_[np.full(len(strip), 1, np.int32), np.full(len(leg), 2, np.int32)]
+    surface = np.arange(len(strip))
+    out, _, changed = legs_under_tables(points, labels, clusters, [(TOP, surface)], FLOOR, UP)
+    assert len(changed) == 0 and (out[len(strip) :] == CHAIR).all()
+
+
 def _pieces_scene() -> Scene:
     """The 1.2 x 0.8 m top at 73 cm (cluster 1) over: a leg the network called chair from 20 cm
     up to the top, its foot missed (2); a leg's lower 40 cm called chair, its upper part
