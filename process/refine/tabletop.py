@@ -15,10 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse.csgraph import connected_components
 
 from capture.recording import Label
-from process.refine.graph import kd_tree
+from process.refine.graph import radius_components
 from process.refine.regrowth import frame, table_tops
 
 _BELOW_TOP_M = 0.03  # a group's foot may sink this far into the top (plane noise)
@@ -62,9 +61,7 @@ def tabletop_objects(
         if label not in r1_m:
             continue
         members = open_[prior[open_] == label]
-        tree = kd_tree(xyz[members])
-        graph = tree.sparse_distance_matrix(tree, r1_m[label] / 2, output_type="coo_matrix")
-        _, group = connected_components(graph, directed=False)
+        group = radius_components(xyz[members], r1_m[label] / 2)
         for g in np.flatnonzero(np.bincount(group) >= min_points):
             idx = members[group == g]
             if _on_a_top(xyz[idx], tops, r1_m[label]):

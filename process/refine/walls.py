@@ -372,13 +372,12 @@ def wall_bands(
     points: npt.NDArray[np.float32], planes: tuple[Plane, ...], cfg: RefineConfig
 ) -> list[tuple[npt.NDArray[np.float64], float]]:
     """Return each wall's plane, signed towards the room's centre, with its band (`wall_band`)."""
+    walls = [plane for plane in planes if plane.label == Label.WALL]
+    if not walls:  # and an empty cloud has no centre
+        return []
     centre = points.mean(axis=0, dtype=np.float64)
-    out = []
-    for plane in planes:
-        if plane.label == Label.WALL:
-            model = facing(plane.model, centre)
-            out.append((model, wall_band(points, plane, model, cfg)))
-    return out
+    models = [facing(plane.model, centre) for plane in walls]
+    return [(m, wall_band(points, p, m, cfg)) for p, m in zip(walls, models, strict=True)]
 
 
 def main_floor(planes: tuple[Plane, ...]) -> Plane | None:

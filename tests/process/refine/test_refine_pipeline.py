@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from helpers_refine import RecordingLogger, grid_patch, labelled
 
@@ -123,10 +124,12 @@ def test_a_cloud_file_without_labels_is_refused(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.filterwarnings("error")  # clean: no NumPy warning either (an empty mean)
+@pytest.mark.parametrize("up", [UP, None])
 @pytest.mark.parametrize("n", [0, 3])
-def test_tiny_clouds_are_clean_no_ops(n: int) -> None:
+def test_tiny_clouds_are_clean_no_ops(n: int, up: npt.NDArray[np.float64] | None) -> None:
     cloud = labelled(np.arange(3 * n, dtype=np.float32).reshape(n, 3), 5)
-    result = refine(cloud, RefineConfig(), up=UP)
+    result = refine(cloud, RefineConfig(), up=up)
     assert len(result.final()) == n
     assert (result.labels_iii == 0).all()  # 3 points cannot make a cluster of 100
     assert all(e.choice is None for e in result.dbscan.values())
