@@ -1,7 +1,9 @@
-"""Neighbour graphs over points: the k-NN edge list and its connected components.
+"""Neighbour graphs over points: the k-d tree, the k-NN edge list and connected components.
 
-The seam vote (seams.py), the piece vote (pieces.py), orphan adoption (orphans.py) and the
-object grouping (objects.py) each link points or clusters and take the components: SciPy's.
+Every neighbour search of the refinement builds its tree here (`kd_tree`). The seam vote
+(seams.py), the piece vote (pieces.py), orphan adoption (orphans.py), the object grouping
+(objects.py), DBSCAN's core graph (dbscan.py) and the table-top groups (tabletop.py) each link
+points or clusters and take the components here: SciPy's, from a CSR matrix built directly.
 """
 
 from __future__ import annotations
