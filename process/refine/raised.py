@@ -30,7 +30,7 @@ height passes for a table's top, and the books on the shelf under it are clutter
 rooms 1 and 2: 415 and 354 points).
 
 Written here because no library relabels over such pieces; the graph is SciPy's (graph.py).
-Measured on generator 4's office at 200k object points (issue 12): see the README.
+Measured on generator 4's office at 200k object points (issue 12): see docs/refinement.md.
 """
 
 from __future__ import annotations

@@ -17,7 +17,8 @@ the refinement at its defaults: literal 0.973 0.982 0.929 0.891 0.918; plateau, 
 0.982 0.941 0.902 0.922. The rule matters little once clusters are grouped into objects and
 DBSCAN runs on voxel cells; those two steps took generator 2 from ~0.80 to ~0.92. (Those
 figures predate the later defaults of issue 12: MinPts from the lower quartile, eps capped,
-labelled structure; their figures are in the README and benchmarks/bench_refine.py.)
+labelled structure; their figures are in the README, docs/refinement.md and
+benchmarks/bench_refine.py.)
 """
 
 from __future__ import annotations
