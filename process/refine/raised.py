@@ -35,7 +35,7 @@ Measured on generator 4's office at 200k object points (issue 12): see docs/refi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -75,6 +75,8 @@ class RaisedVote:
     clusters: npt.NDArray[np.int32]
     relabelled: npt.NDArray[np.intp]
     sunk: int = 0  # of them, monitor points under a top made table
+    above: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # every point above a top's band over its footprint: what stands on a table (any label)
 
 
 def raised_off_tables(
@@ -95,6 +97,7 @@ def raised_off_tables(
     """
     out_labels, out_clusters = labels.copy(), clusters.copy()
     changed: list[npt.NDArray[np.intp]] = []
+    above: list[npt.NDArray[np.intp]] = []
     sunk = 0
     for model, surface in tops:
         if len(surface) < MIN_POINTS:
@@ -102,6 +105,7 @@ def raised_off_tables(
         # the surface's own points above its band count too: RANSAC's band (plane_distance_m)
         # takes a base plate 1 cm up into the top
         rows, under = _above(points, model, surface, up)
+        above.append(rows)
         under = under[out_labels[under] == Label.TV_MONITOR]
         if len(under):
             desk = out_clusters[surface][out_labels[surface] == Label.TABLE]
@@ -118,7 +122,8 @@ def raised_off_tables(
             out_clusters[rows[members]] = cluster
             changed.append(rows[members])
     relabelled = np.unique(np.concatenate(changed)) if changed else np.zeros(0, np.intp)
-    return RaisedVote(out_labels, out_clusters, relabelled, sunk)
+    on_top = np.unique(np.concatenate(above)) if above else np.zeros(0, np.intp)
+    return RaisedVote(out_labels, out_clusters, relabelled, sunk, on_top)
 
 
 def _above(

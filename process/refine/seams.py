@@ -10,7 +10,11 @@ its surface's majority, lying within `seam_vote_m` of a point of that majority c
 when:
 - the majority holds at least `MAJORITY` of the surface, and
 - its own cluster lies mostly elsewhere (a fringe of an object beyond this surface), not
-  mostly on it (a book or a keyboard lying flat on a desk is an object of its own).
+  mostly on it (a book or a keyboard lying flat on a desk is an object of its own), and
+- it does not stand on a table when the class is table: above a desk's top, over its
+  footprint (raised.py), only level points (a stretch of the top, a second desk's top 1.5 cm
+  higher) may take it. A box on a desk whose front lies in one plane with the desk's front
+  panel shares the panel's surface, and its lower side had taken the desk's label.
 
 Written here because neither Open3D nor SciPy has smooth-surface region growing (PCL's
 RegionGrowing is not a dependency); the graph's connected components are SciPy's (graph.py).
@@ -24,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
-from capture.recording import OBJECT_LABELS
+from capture.recording import OBJECT_LABELS, Label
 from process.refine.cells import class_cells
 from process.refine.graph import components, kd_tree
 
@@ -33,6 +37,7 @@ NORMAL_NEIGHBOURS = 16  # points of each local covariance (normal and surface va
 MAJORITY = 0.6  # a surface's class holds this share of its points
 FRINGE = 0.5  # a point flips only if less than this share of its cluster is on the surface
 MIN_SURFACE = 50  # points a surface needs to vote
+LEVEL_DEG = 25.0  # above a table's top, a point whose normal is this near up may still take table
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,8 @@ def seam_vote(
     angle_deg: float,
     flatness: float,
     max_points: int = 400_000,
+    standing: npt.NDArray[np.intp] | None = None,
+    up: npt.NDArray[np.float64] | None = None,
 ) -> SeamVote:
     """Relabel object points at class seams by the majority of the smooth surface they lie on.
 
@@ -69,6 +76,10 @@ def seam_vote(
         max_points: past this many object points the vote runs on the centroids of each
             class's points per voxel (the finest voxel giving about this many), and every
             point takes its centroid's verdict: the graph's memory stays bounded.
+        standing: indices of the points above a table's top, over its footprint (raised.py),
+            with `up`: those not level never take table (a cell, past `max_points`, when most
+            of its points are).
+        up: gravity-up, for `standing`.
     """
     out = labels.copy()
     objects = np.flatnonzero(np.isin(labels, OBJECT_LABELS))
@@ -83,9 +94,13 @@ def seam_vote(
     capped = len(objects) > max_points
     if capped:
         xyz, own, ids, group = class_cells(xyz, own, ids, max_points)
+    on_table = np.zeros(len(xyz), bool)
+    if standing is not None and len(standing) and up is not None:
+        share = np.bincount(group, np.isin(objects, standing).astype(np.float64))
+        on_table = share > 0.5 * np.bincount(group)
     xyz64 = np.asarray(xyz, np.float64)
     neighbours = kd_tree(xyz64).query(xyz64, NEIGHBOURS + 1, workers=-1)
-    new = _vote(xyz64, own, ids, neighbours, seam_m, angle_deg, flatness)[group]
+    new = _vote(xyz64, own, ids, neighbours, seam_m, angle_deg, flatness, on_table, up)[group]
     flip = new != labels[objects]
     out[objects[flip]] = new[flip]
     return SeamVote(out, objects[flip], None if capped else neighbours)
@@ -99,12 +114,20 @@ def _vote(
     seam_m: float,
     angle_deg: float,
     flatness: float,
+    on_table: npt.NDArray[np.bool_],
+    up: npt.NDArray[np.float64] | None,
 ) -> npt.NDArray[np.uint8]:
-    """Return the labels after the vote, for points each of one class and one cluster."""
-    surface = _surfaces(xyz, neighbours, angle_deg=angle_deg, flatness=flatness)
+    """Return the labels after the vote, for points each of one class and one cluster.
+
+    `on_table`: the points above a table's top (with `up`); of them only level ones take table.
+    """
+    surface, normals = _surfaces(xyz, neighbours, angle_deg=angle_deg, flatness=flatness)
     major, share, size = _majority(surface, own)
     candidate = (own != major[surface]) & (share[surface] >= MAJORITY)
     candidate &= (size[surface] >= MIN_SURFACE) & (_on_surface_share(ids, surface) < FRINGE)
+    if up is not None and on_table.any():
+        level = np.abs(normals @ up) > np.cos(np.radians(LEVEL_DEG))
+        candidate &= ~(on_table & ~level & (major[surface] == Label.TABLE))
     out = own.copy()
     for target in np.unique(major[surface][candidate]):
         rows = np.flatnonzero(candidate & (major[surface] == target))
@@ -119,8 +142,11 @@ def _surfaces(
     *,
     angle_deg: float,
     flatness: float,
-) -> npt.NDArray[np.int32]:
-    """Return a smooth-surface id per point: components of the flat, coplanar-neighbour graph."""
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64]]:
+    """Return per point its smooth surface and its normal.
+
+    Surfaces are the components of the graph of flat points and their coplanar neighbours.
+    """
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
     search = o3d.geometry.KDTreeSearchParamKNN(NORMAL_NEIGHBOURS)
     cloud.estimate_covariances(search)
@@ -142,7 +168,7 @@ def _surfaces(
     ok &= np.abs((normals[near] * own).sum(axis=2)) > np.cos(np.radians(angle_deg))
     ok &= np.abs(((xyz[near] - xyz[rows][:, None, :]) * own).sum(axis=2)) < spacing  # tangent
     i = np.repeat(rows, np.count_nonzero(ok, axis=1))
-    return components(len(xyz), i, near[ok])[1]
+    return components(len(xyz), i, near[ok])[1], normals
 
 
 def _majority(

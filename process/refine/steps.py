@@ -308,11 +308,12 @@ def refine(
         floor_band = objects[low & np.isin(labels_iii[objects], OBJECT_LABELS)]
     lap("regrowth")
     raised, sunk, legs = np.zeros(0, np.intp), 0, np.zeros(0, np.intp)
+    standing = None  # points above tables' tops: what stands on them (raised.py, seams.py)
     tops = [(p.model, p.top) for p in planes.planes if p.top is not None]
     if cfg.raised_vote and planes.up is not None:
         lifted = raised_off_tables(cloud.points, labels_iii, clusters_iii, tops, planes.up)
         labels_iii, clusters_iii, raised = lifted.labels, lifted.clusters, lifted.relabelled
-        sunk = lifted.sunk
+        sunk, standing = lifted.sunk, lifted.above
         lap("raised")
     floor = main_floor(planes.planes)
     if cfg.table_legs and planes.up is not None:
@@ -353,6 +354,7 @@ def refine(
         vote = seam_vote(
             cloud.points, labels_iii, clusters_iii, seam_m=cfg.seam_vote_m,
             angle_deg=cfg.seam_angle_deg, flatness=cfg.seam_flatness, max_points=cfg.max_cells,
+            standing=standing, up=planes.up,
         )  # fmt: skip
         labels_iii, seams, neighbours = vote.labels, vote.relabelled, vote.neighbours
         lap("seams")

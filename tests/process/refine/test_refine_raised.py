@@ -5,12 +5,15 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from helpers_refine import grid_patch, labelled
 
+import process.refine.steps as steps
 from capture.recording import Label
 from process.refine import RefineConfig, refine
 from process.refine.job import refinement_metrics
 from process.refine.raised import raised_off_tables
+from process.refine.seams import seam_vote
 
 UP = np.array([0.0, 0.0, 1.0])
 DESK_Z = 0.75
@@ -285,3 +288,45 @@ def test_a_warped_desk_sinks_nothing_within_its_band() -> None:
     high = ring[points[ring, 2] >= DESK_Z]  # within the band (only troughs fall under it)
     assert len(high) > 500
     assert (vote.labels[high] == Label.TV_MONITOR).all()
+
+
+def test_the_vote_names_what_stands_on_the_desk() -> None:
+    """`above`: every point over the desk's footprint above its top's band, whatever its label
+    (the seam vote keeps the table's label off them); none of the desk's own."""
+    points, at = _scene(_desk_with_monitor(np.random.default_rng(6)))
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    labels[at["screen"]] = labels[at["stand"]] = Label.TV_MONITOR
+    clusters = np.where(labels == Label.TABLE, 1, 2).astype(np.int32)
+    tops = [(np.array([0.0, 0.0, 1.0, -DESK_Z]), at["desk"])]
+    above = raised_off_tables(points, labels, clusters, tops, UP).above
+    high = points[:, 2] > DESK_Z + 0.02  # well clear of the band (2 mm noise, 5 mm at least)
+    standing = np.concatenate([at["plate"], at["stand"], at["screen"], at["box"]])
+    assert set(np.flatnonzero(high)) <= set(above)
+    tail = np.setdiff1d(above, standing)  # the desk's noise tail over its band
+    assert np.isin(tail, at["desk"]).all() and len(tail) < 0.01 * len(at["desk"])
+    assert len(raised_off_tables(points, labels, clusters, [], UP).above) == 0
+
+
+def test_refine_tells_the_seam_vote_what_stands_on_the_desk(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Through refine: the seam vote is given the points above the desk's top and gravity, and
+    keeps the table's label off the monitor's stand there (test_refine_seams.py)."""
+    told: dict[str, object] = {}
+
+    def spy(*args: object, **kwargs: object) -> object:
+        told.update(kwargs)
+        return seam_vote(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(steps, "seam_vote", spy)
+    parts = _desk_with_monitor(np.random.default_rng(3))
+    legs = [_box((x, y, 0.0), (x + 0.04, y + 0.04, DESK_Z)) for x in (0.0, 1.5) for y in (0.0, 0.7)]
+    floor = grid_patch((-0.5, 2.1), (-0.5, 1.3), z=0.0, step=0.02)
+    points, at = _scene({**parts, "legs": np.concatenate(legs), "floor": floor})
+    labels = np.full(len(points), Label.TABLE, np.uint8)
+    labels[at["floor"]] = Label.FLOOR
+    labels[at["screen"]] = labels[at["stand"]] = labels[at["box"]] = Label.TV_MONITOR
+    refine(labelled(points, labels), RefineConfig(plane_min_points=1500), up=UP)
+    high = np.flatnonzero(points[:, 2] > DESK_Z + 0.1)  # the screen, the stand, the box's top
+    assert np.isin(high, np.asarray(told["standing"])).all()
+    assert np.allclose(np.asarray(told["up"]), UP, atol=0.01)  # the floor plane's normal
