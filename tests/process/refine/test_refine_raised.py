@@ -55,6 +55,14 @@ def _scene(parts: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarr
     return points, index
 
 
+def _desk_on_legs() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The desk with its monitor on four legs over a floor: what refine finds a table surface in."""
+    parts = _desk_with_monitor(np.random.default_rng(3))
+    legs = [_box((x, y, 0.0), (x + 0.04, y + 0.04, DESK_Z)) for x in (0.0, 1.5) for y in (0.0, 0.7)]
+    floor = grid_patch((-0.5, 2.1), (-0.5, 1.3), z=0.0, step=0.02)
+    return _scene({**parts, "legs": np.concatenate(legs), "floor": floor})
+
+
 def test_a_monitors_plate_and_stand_foot_called_table_join_the_monitor() -> None:
     points, at = _scene(_desk_with_monitor(np.random.default_rng(0)))
     labels = np.full(len(points), Label.TABLE, np.uint8)
@@ -153,10 +161,7 @@ def test_without_tops_or_with_nothing_above_nothing_changes() -> None:
 
 def test_refine_gives_the_plate_and_foot_back_to_the_monitor() -> None:
     """Through refine (the desk found as a table surface above a floor), shown in the .rrd."""
-    parts = _desk_with_monitor(np.random.default_rng(3))
-    legs = [_box((x, y, 0.0), (x + 0.04, y + 0.04, DESK_Z)) for x in (0.0, 1.5) for y in (0.0, 0.7)]
-    floor = grid_patch((-0.5, 2.1), (-0.5, 1.3), z=0.0, step=0.02)
-    points, at = _scene({**parts, "legs": np.concatenate(legs), "floor": floor})
+    points, at = _desk_on_legs()
     labels = np.full(len(points), Label.TABLE, np.uint8)
     labels[at["floor"]] = Label.FLOOR
     labels[at["screen"]] = labels[at["stand"]] = Label.TV_MONITOR
@@ -319,10 +324,7 @@ def test_refine_tells_the_seam_vote_what_stands_on_the_desk(
         return seam_vote(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(steps, "seam_vote", spy)
-    parts = _desk_with_monitor(np.random.default_rng(3))
-    legs = [_box((x, y, 0.0), (x + 0.04, y + 0.04, DESK_Z)) for x in (0.0, 1.5) for y in (0.0, 0.7)]
-    floor = grid_patch((-0.5, 2.1), (-0.5, 1.3), z=0.0, step=0.02)
-    points, at = _scene({**parts, "legs": np.concatenate(legs), "floor": floor})
+    points, at = _desk_on_legs()
     labels = np.full(len(points), Label.TABLE, np.uint8)
     labels[at["floor"]] = Label.FLOOR
     labels[at["screen"]] = labels[at["stand"]] = labels[at["box"]] = Label.TV_MONITOR
