@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks import refine_suite
 from benchmarks.ceiling import majority_ceiling
-from benchmarks.refine_suite import Case, cases, held_out, load
+from benchmarks.refine_suite import Case, cases, held_out, load, recordings
 from capture.recording import Label
 from process.cloud import LabelledCloud
 from process.refine import RefineConfig
@@ -90,6 +90,23 @@ def test_the_held_out_clouds_share_no_seed_with_the_suite() -> None:
     assert groups == {"g2", "g3", "g4 60k", "g4 200k", "g4 500k", "g5 60k", "g5 200k", "rec"}
     assert refine_suite._group("g4 office 60k") == "g4"  # the suite's g4 line stays one
     assert refine_suite._group("g5 seed 3 200k") == "g5"
+
+
+def test_the_forty_recordings_share_no_seed_with_the_suite_or_the_held_out_ones() -> None:
+    """`--recordings`: seeds 60-99, one summary line, none of the suite's or held-out seeds."""
+    made = recordings()
+    assert len(made) == 40 and {refine_suite._group(n) for n in made} == {"rec"}
+    seeds = {make.args[0] for make in made.values() if isinstance(make, partial)}
+    assert seeds == set(range(60, 100))
+    others = {**cases(), **held_out()}
+    other = {m.args[0] for n, m in others.items() if n.startswith("rec") and isinstance(m, partial)}
+    assert other == {7, 8, 9, 12, 13, *range(20, 28)} and not seeds & other
+
+
+def test_held_out_and_recordings_are_one_or_the_other(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        refine_suite.main(["--held-out", "--recordings", "--only", "no such cloud"])
+    assert "not allowed with argument" in capsys.readouterr().err
 
 
 def test_a_groups_line_counts_the_clouds_at_095_and_those_gaining_005() -> None:
