@@ -9,6 +9,7 @@ from scipy import ndimage
 from capture.recording import Label
 
 PIECE_CELL_M = 0.1  # grid of the connected pieces of a plane: gaps over ~10 cm separate
+DENSITY_RADIUS_M = 0.05  # disc over which a surface density is counted (planes, surfaces)
 
 
 def plane_uv(

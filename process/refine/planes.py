@@ -14,6 +14,7 @@ from process.refine.config import RefineConfig
 from process.refine.graph import kd_tree
 from process.refine.gravity import gravity
 from process.refine.plane_grid import (
+    DENSITY_RADIUS_M,
     PIECE_CELL_M,
     connected_pieces,
     plane_uv,
@@ -32,7 +33,6 @@ from process.refine.walls import (
 
 logger = logging.getLogger(__name__)
 
-_DENSITY_RADIUS_M = 0.05  # disc over which the cloud's surface density is counted
 _STRUCTURE_SHARE = 0.5  # a plane the network labels this much floor (ceiling, wall) is one
 _WALL_OBJECT_MAX = 0.5  # an upright plane whose wall points the network labels more objects is
 # no wall: a standing person's front and a chair's back in line (fresh recordings 68 and 74:
@@ -157,8 +157,8 @@ def min_plane_points(
         return max(cfg.plane_min_points, 3), math.nan
 
     probe = points[rng.choice(len(points), min(2000, len(points)), replace=False)]
-    counts = kd_tree(points).query_ball_point(probe, _DENSITY_RADIUS_M, return_length=True)
-    density = float(np.mean(counts) / (math.pi * _DENSITY_RADIUS_M**2))
+    counts = kd_tree(points).query_ball_point(probe, DENSITY_RADIUS_M, return_length=True)
+    density = float(np.mean(counts) / (math.pi * DENSITY_RADIUS_M**2))
     if cfg.plane_min_points:
         return cfg.plane_min_points, density
     by_area, by_share = cfg.plane_min_area_m2 * density, cfg.plane_min_share * len(points)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from process.errors import ConfigError
 from process.refine import RefineConfig, refine
 from process.refine.job import refine_and_log, refinement_metrics
 from process.refine.planes import Plane, segment_planes
-from process.refine.surfaces import table_surfaces
+from process.refine.surfaces import own_density, table_surfaces
 
 UP = np.array([0.0, 0.0, 1.0])
 CFG = RefineConfig(plane_min_points=150, max_planes=10)  # every plane here is found
@@ -280,3 +281,62 @@ def test_a_thick_wall_does_not_join_a_desk_and_a_cabinet_along_it() -> None:
     no_band = dataclasses.replace(CFG, structure_band_sigmas=0.0)  # the wall reaches D alone
     found, table = table_surfaces(points, tuple(planes), UP, labels, no_band, density)
     assert table[where["cabinet"]].mean() > 0.9
+
+
+def _far_desk(said: Label) -> tuple[np.ndarray, np.ndarray, tuple[Plane, ...], slice, slice]:
+    """A floor at 2 cm and, level at 0.75 m, a desk (0.8 x 0.5 m) and a tray (0.3 x 0.3 m)
+    seen from afar: 4 cm apart. The network calls 60 % of the desk `said`, the rest wall; the
+    tray table. At the floor's density the desk is 0.1 m^2, under `table_min_area_m2`."""
+    floor = grid_patch((0.0, 4.0), (0.0, 3.0))
+    desk = grid_patch((0.5, 1.3), (1.0, 1.5), z=0.75, step=0.04)
+    tray = grid_patch((2.5, 2.8), (1.0, 1.3), z=0.75, step=0.04)
+    points = np.concatenate([floor, desk, tray]).astype(np.float32)
+    at_desk, at_tray = (
+        slice(len(floor), len(floor) + len(desk)),
+        slice(len(floor) + len(desk), None),
+    )
+    labels = np.full(len(points), Label.FLOOR, np.uint8)
+    labels[at_desk] = np.where(np.arange(len(desk)) % 5 < 3, said, Label.WALL)
+    labels[at_tray] = Label.TABLE
+    none = np.zeros(0, np.intp)
+    planes = (
+        Plane(np.array([0.0, 0.0, 1.0, -0.75]), np.arange(len(floor), len(points)), 0, none, 0.75),
+        Plane(np.array([0.0, 0.0, 1.0, 0.0]), np.arange(len(floor)), Label.FLOOR,
+              np.arange(len(floor)), 0.0),
+    )  # fmt: skip
+    return points, labels, planes, at_desk, at_tray
+
+
+def test_a_desk_seen_from_afar_that_the_network_calls_table_is_measured_at_its_own_density() -> (
+    None
+):
+    points, labels, planes, desk, tray = _far_desk(Label.TABLE)
+    out, table = table_surfaces(points, planes, UP, labels, RefineConfig(), 2500.0)
+    assert table[desk].sum() == (labels[desk] == Label.WALL).sum() > 0  # its wall points
+    assert not table[tray].any()  # 0.09 m^2 at its own density too
+    assert out[0].top is not None and set(out[0].top) == set(range(desk.start, desk.stop))
+    assert out[0].note.startswith("table surface: level, 0.75 m above the floor")
+    found = re.search(r"([\d.]+) m\^2 in 1 piece", out[0].note)
+    assert found is not None
+    area = float(found.group(1))
+    assert 0.4 <= area <= 0.5  # 0.8 x 0.5 m: 260 points, 0.10 m^2 at the cloud's density
+
+
+@pytest.mark.parametrize("said", [Label.CLUTTER, Label.CHAIR])
+def test_a_sparse_piece_the_network_calls_something_else_keeps_the_clouds_density(
+    said: Label,
+) -> None:
+    """A box's top or a seat seen from afar is no desk: only table pieces take their own density."""
+    points, labels, planes, _, _ = _far_desk(said)
+    out, table = table_surfaces(points, planes, UP, labels, RefineConfig(), 2500.0)
+    assert not table.any() and out[0].top is None
+    assert out[0].note.startswith("not a table surface")
+
+
+def test_own_density_is_the_clouds_measure_on_the_pieces_points() -> None:
+    """A 2 cm grid is 2,500 points per m^2; the measure counts within 5 cm, so a piece's edges
+    read a little lower: 0.8 x 0.5 m at 2 cm and at 4 cm (625 per m^2)."""
+    level = np.array([0.0, 0.0, 1.0, -0.75])
+    dense = own_density(grid_patch((0.0, 0.8), (0.0, 0.5), z=0.75), level)
+    sparse = own_density(grid_patch((0.0, 0.8), (0.0, 0.5), z=0.75, step=0.04), level)
+    assert 0.8 * 2500 < dense < 2500 and 0.7 * 625 < sparse < 625
