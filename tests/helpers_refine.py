@@ -1,7 +1,9 @@
-"""The paper's adaptive DBSCAN written literally (O(n^2), K = 1..n-1), and small test clouds."""
+"""The paper's adaptive DBSCAN written literally (O(n^2), K = 1..n-1), small test clouds, and
+the checks every vote after regrowth shares."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -10,7 +12,11 @@ import numpy as np
 import numpy.typing as npt
 
 from process.cloud import LabelledCloud
+from process.refine import RefineConfig, RefineResult, refine
+from process.refine.job import refinement_metrics
 from viz.logger import NullLogger
+
+UP = np.array([0.0, 0.0, 1.0])  # gravity-up of the small test clouds
 
 
 def literal_dbscan(
@@ -120,3 +126,34 @@ class RecordingLogger(NullLogger):
             calls.append((method, first, kwargs))
 
         return record
+
+
+def box_on_floor(x: float, y: float, size: float, height: float) -> npt.NDArray[np.float32]:
+    """The four sides and the top of a box standing on the floor, at 1 cm spacing."""
+    face = grid_patch((0.0, size), (0.0, height), step=0.01)
+    front, side = face[:, [0, 2, 1]], face[:, [2, 0, 1]]
+    top = grid_patch((0.0, size), (0.0, size), z=height, step=0.01)
+    dy, dx = np.array([0.0, size, 0.0], np.float32), np.array([size, 0.0, 0.0], np.float32)
+    sides = [front, front + dy, side, side + dx, top]
+    return (np.concatenate(sides) + np.array([x, y, 0.0], np.float32)).astype(np.float32)
+
+
+def counted_shown_and_switched_off(
+    cloud: LabelledCloud,
+    result: RefineResult,
+    kept: npt.NDArray[np.intp],
+    field: str,
+    metric: str,
+    switch: str,
+) -> None:
+    """The rule's points (`field` of the result) are counted in metrics.json (`metric`) and
+    shown with the votes in the .rrd; with the rule off (`switch`, off in `paper()`), the `kept`
+    points keep the class DBSCAN gave them and the rule moves nothing."""
+    moved = getattr(result, field)
+    assert refinement_metrics(result, gt_cloud=None)["points"][metric] == len(moved)
+    shown = {tuple(p) for p in result.seam_cloud().points.tolist()}  # the .rrd's votes entity
+    assert {tuple(p) for p in cloud.points[kept].tolist()} <= shown
+    rule_off: dict[str, Any] = {switch: False}
+    off = refine(cloud, dataclasses.replace(RefineConfig(), **rule_off), up=UP)
+    assert (off.labels_iii[kept] == result.labels_ii[kept]).all() and len(getattr(off, field)) == 0
+    assert not getattr(RefineConfig.paper(), switch)

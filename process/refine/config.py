@@ -149,7 +149,11 @@ class RefineConfig:
     # seat (legs.py)
     table_tops: bool = True  # a chair, person or sofa cluster lying mostly on a table's top
     # gives its points there to the table (tops.py)
+    fill_tops: bool = True  # a table top's points the network calls table that nothing took
+    # join the table (tops.py)
     flat_floor: bool = True  # an object cluster lying flat in the floor's band is floor (flat.py)
+    low_chairs: bool = True  # a chair cluster lower than a seat, no part of a chair, is clutter
+    # (low.py)
     flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
     # apart from every other object, is wall (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
@@ -208,6 +212,8 @@ class RefineConfig:
             "chair_seats": False,
             "table_tops": False,
             "flat_floor": False,
+            "low_chairs": False,
+            "fill_tops": False,
             "flat_walls": False,
         }
         return cls(**{**paper, **overrides})

@@ -143,6 +143,8 @@ def refinement_metrics(
         "tops_relabelled": len(result.tops),
         "flat_on_floor": len(result.flat),
         "flat_on_walls": len(result.flat_walls),
+        "low_chairs": len(result.low_chairs),
+        "tops_filled": len(result.top_filled),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),
         "lone_objects": len(result.lone),

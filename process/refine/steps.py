@@ -23,6 +23,7 @@ from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.flat import flat_on_floor, flat_on_walls
 from process.refine.inside import structure_inside_objects
 from process.refine.legs import legs_under_tables, seats_called_table
+from process.refine.low import low_chairs
 from process.refine.orphans import adopt_orphans, lone_objects
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
@@ -31,7 +32,7 @@ from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
 from process.refine.tabletop import tabletop_objects
-from process.refine.tops import tops_called_seats
+from process.refine.tops import left_on_tops, tops_called_seats
 from process.refine.walls import behind_walls, floor_said_low, main_floor, wall_bands
 
 logger = logging.getLogger(__name__)
@@ -110,6 +111,10 @@ class RefineResult:
     # input indices of object clusters lying flat in the floor's band, made floor (flat.py)
     flat_walls: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of standing-class clusters lying flat on a wall, apart, made wall (flat.py)
+    low_chairs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of chair clusters lower than a seat, part of no chair, made clutter (low.py)
+    top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices on a table's top the network calls table, left 0, given the table (tops.py)
 
     @property
     def kept(self) -> npt.NDArray[np.bool_]:
@@ -162,7 +167,7 @@ class RefineResult:
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
         votes = np.union1d(votes, self.seats)
         votes = np.union1d(votes, np.union1d(self.tops, self.flat))
-        votes = np.union1d(votes, self.flat_walls)
+        votes = np.union1d(votes, np.union1d(self.flat_walls, self.low_chairs))
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -221,6 +226,7 @@ def refine(
     n_behind = n_faces = 0
     filled = orphans = lone = strays_rejoined = enclosed = np.zeros(0, np.intp)
     tabletop = floor_band = np.zeros(0, np.intp)
+    growable = None  # the points regrowth could label (None: no regrowth)
     if cfg.regrowth:
         r1 = {c: e.choice.eps_m for c, e in per_class.items() if e.choice is not None}
         # only objects grow: structure is the plane step's, and a leftover wall or floor
@@ -273,6 +279,8 @@ def refine(
         above, rejoined = grown.above_tables, grown.rejoined
         open_ = np.zeros(len(cloud), bool)
         open_[objects] = True  # not on a structural plane, not SOR's outlier
+        growable = np.zeros(len(cloud), bool)  # ... nor behind a wall, nor on a bare face
+        growable[objects[~keep_out]] = True
         filled = fill_faces(
             cloud.points, planes, network, labels_iii, clusters_iii, cfg, open_=open_
         )
@@ -322,11 +330,13 @@ def refine(
             planes.up, network,
         )  # fmt: skip
         lap("legs")
-    # votes by a cloud's floor plane: seats called table (legs.py), objects flat on it (flat.py)
+    # votes by a cloud's floor plane: seats called table (legs.py), objects flat on it (flat.py),
+    # chairs lower than a seat (low.py)
     by_floor: dict[str, npt.NDArray[np.intp]] = {}
     for step, rule, on in (
         ("seats", seats_called_table, cfg.chair_seats),
         ("flat", flat_on_floor, cfg.flat_floor),
+        ("low_chairs", low_chairs, cfg.low_chairs),
     ):
         by_floor[step] = np.zeros(0, np.intp)
         if on and planes.up is not None:
@@ -348,6 +358,13 @@ def refine(
             cloud.points, labels_iii, clusters_iii, [top for _, top in tops]
         )
         lap("tops")
+    top_filled = np.zeros(0, np.intp)
+    if cfg.fill_tops and growable is not None:
+        labels_iii, clusters_iii, top_filled = left_on_tops(
+            labels_iii, clusters_iii, [top for _, top in tops], cloud.labels, growable
+        )
+        regrown = np.union1d(regrown, top_filled)  # shown with the regrown points
+        lap("fill_tops")
     seams = np.zeros(0, np.intp)
     neighbours = None
     if cfg.seam_vote_m > 0:
@@ -376,6 +393,7 @@ def refine(
         pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
         seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"], flat_walls=on_walls,
+        low_chairs=by_floor["low_chairs"], top_filled=top_filled,
     )  # fmt: skip
 
 

@@ -2,32 +2,16 @@
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Any
-
 import numpy as np
 import numpy.typing as npt
-from helpers_refine import grid_patch, labelled
+from helpers_refine import UP, box_on_floor, counted_shown_and_switched_off, grid_patch, labelled
 
 from capture.recording import Label
-from process.cloud import LabelledCloud
-from process.refine import RefineConfig, RefineResult, refine
+from process.refine import RefineConfig, refine
 from process.refine.flat import flat_on_floor, flat_on_walls
-from process.refine.job import refinement_metrics
 
 TABLE, CHAIR, CLUTTER, FLOOR = Label.TABLE, Label.CHAIR, Label.CLUTTER, Label.FLOOR
 WALL, MONITOR = Label.WALL, Label.TV_MONITOR
-UP = np.array([0.0, 0.0, 1.0])
-
-
-def _box(x: float, y: float, size: float, height: float) -> npt.NDArray[np.float32]:
-    """The four sides and the top of a box standing on the floor, at 1 cm spacing."""
-    face = grid_patch((0.0, size), (0.0, height), step=0.01)
-    front, side = face[:, [0, 2, 1]], face[:, [2, 0, 1]]
-    top = grid_patch((0.0, size), (0.0, size), z=height, step=0.01)
-    dy, dx = np.array([0.0, size, 0.0], np.float32), np.array([size, 0.0, 0.0], np.float32)
-    sides = [front, front + dy, side, side + dx, top]
-    return (np.concatenate(sides) + np.array([x, y, 0.0], np.float32)).astype(np.float32)
 
 
 def test_an_object_flat_in_the_floor_band_becomes_floor_what_stands_on_it_stays() -> None:
@@ -35,7 +19,7 @@ def test_an_object_flat_in_the_floor_band_becomes_floor_what_stands_on_it_stays(
     patch 5 mm up called table (cluster 1) is floor; a 40 cm box whose foot lies in the band
     (2) and a 6 cm flat box, half its points in the band (3), stay."""
     patch = grid_patch((0.0, 0.5), (0.0, 0.45), z=0.005, step=0.01)
-    tall, low = _box(1.0, 0.0, 0.4, 0.4), _box(2.0, 0.0, 0.3, 0.06)
+    tall, low = box_on_floor(1.0, 0.0, 0.4, 0.4), box_on_floor(2.0, 0.0, 0.3, 0.06)
     points = np.concatenate([patch, tall, low]).astype(np.float32)
     labels = np.repeat(
         np.array([TABLE, CHAIR, CLUTTER], np.uint8), [len(patch), len(tall), len(low)]
@@ -79,7 +63,7 @@ def test_the_refinement_gives_a_floor_patch_called_table_back_to_the_floor() -> 
     assert np.isin(kept, result.flat).all()
     desk_points = np.arange(len(floor), len(points))
     assert (result.labels_iii[desk_points] == TABLE).mean() > 0.95
-    _counted_shown_and_switched_off(cloud, result, kept, "flat", "flat_on_floor", "flat_floor")
+    counted_shown_and_switched_off(cloud, result, kept, "flat", "flat_on_floor", "flat_floor")
 
 
 def _on_wall(
@@ -140,7 +124,7 @@ def test_the_refinement_gives_a_wall_patch_called_chair_apart_from_the_chair_bac
     floor = grid_patch((0.0, 4.0), (-2.0, 2.0), step=0.02)
     wall = _on_wall((-2.0, 2.0), (0.0, 2.5), 0.0, step=0.02)
     patch = (np.abs(wall[:, 1] - 0.15) < 0.15) & (np.abs(wall[:, 2] - 0.4) < 0.15)
-    chair = _box(0.1, 0.4, 0.45, 0.9)
+    chair = box_on_floor(0.1, 0.4, 0.45, 0.9)
     points = np.concatenate([floor, wall, chair])
     labels = np.concatenate(
         [np.full(len(floor), FLOOR), np.where(patch, CHAIR, WALL), np.full(len(chair), CHAIR)]
@@ -154,27 +138,4 @@ def test_the_refinement_gives_a_wall_patch_called_chair_apart_from_the_chair_bac
     assert np.isin(kept, result.flat_walls).all()
     chair_points = np.arange(len(floor) + len(wall), len(points))
     assert (result.labels_iii[chair_points] == CHAIR).mean() > 0.95
-    _counted_shown_and_switched_off(
-        cloud, result, kept, "flat_walls", "flat_on_walls", "flat_walls"
-    )
-
-
-def _counted_shown_and_switched_off(
-    cloud: LabelledCloud,
-    result: RefineResult,
-    kept: npt.NDArray[np.intp],
-    field: str,
-    metric: str,
-    switch: str,
-) -> None:
-    """The rule's points (`field` of the result) are counted in metrics.json (`metric`) and
-    shown with the votes in the .rrd; with the rule off (`switch`, off in `paper()`), the `kept`
-    points keep the class DBSCAN gave them and the rule moves nothing."""
-    moved = getattr(result, field)
-    assert refinement_metrics(result, gt_cloud=None)["points"][metric] == len(moved)
-    shown = {tuple(p) for p in result.seam_cloud().points.tolist()}  # the .rrd's votes entity
-    assert {tuple(p) for p in cloud.points[kept].tolist()} <= shown
-    rule_off: dict[str, Any] = {switch: False}
-    off = refine(cloud, dataclasses.replace(RefineConfig(), **rule_off), up=UP)
-    assert (off.labels_iii[kept] == result.labels_ii[kept]).all() and len(getattr(off, field)) == 0
-    assert not getattr(RefineConfig.paper(), switch)
+    counted_shown_and_switched_off(cloud, result, kept, "flat_walls", "flat_on_walls", "flat_walls")

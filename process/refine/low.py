@@ -1,0 +1,85 @@
+"""What the network calls chair and stands lower than any seat is clutter.
+
+A network names a low box or bin on the floor chair whole: on fused maps of simulated
+recordings a carton 39 cm tall (fresh recording 77: 1,135 points the network called floor and
+chair, made one chair by regrowth) and boxes and bins 30-38 cm tall (recordings 82, 97, 98:
+51-385 points a cluster), on TUM `fr1_rpy` a blue waste bin under the desk (1,110 points, 40 cm).
+DBSCAN keeps each as a chair of its own. But a chair is a seat: every chair of the simulator and
+of generators 1-4 has its seat 42-50 cm over the floor (real chairs' 40-52 cm), and its back
+rises higher. So a chair cluster whose highest point stays under `SEAT_MIN_M` over the floor
+plane is clutter, the map's class for objects of no other class, when
+- it has a lid, as a box or a bin has and a chair's legs have not: its points within `TOP_M` of
+  its highest cover `TOP_CELLS` connected cells of `TOP_CELL_M` in plan (the boxes 8-48 cells,
+  but one of recording 98 whose lid lies in pieces; the 86 leg pieces of chairs on the 40 fresh
+  recordings, whose seat the map lacks or DBSCAN split off, 1-6 cells: their seat seen only
+  from the side, under a desk), and
+- no chair's seat lies over it: fewer than `ABOVE_SHARE` of its point count of chair points
+  higher than it within `ABOVE_M` of its plan (a swivel chair's base, a star 60 cm across, has a
+  lid; its seat covers it).
+A cluster made clutter keeps its id. Written here because no library labels by height over a
+plane; the floor plane is the plane step's, the lid's pieces `plane_grid`'s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from capture.recording import Label
+from process.refine.plane_grid import connected_pieces, grid_of, plane_uv
+
+SEAT_MIN_M = 0.40  # a chair rises at least this high over the floor: its seat
+TOP_M = 0.04  # a piece's lid: its points within this of its highest ...
+TOP_CELL_M = 0.05  # ... cover at least TOP_CELLS connected cells of this side in plan
+TOP_CELLS = 8
+ABOVE_M = 0.1  # chair points higher than a piece within this of its plan ...
+ABOVE_SHARE = 0.1  # ... as many as this share of its points: a seat over it
+
+
+def low_chairs(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    floor: npt.NDArray[np.float64] | None,
+    up: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
+    """Return (labels, clusters, relabelled indices) with chairs lower than a seat made clutter.
+
+    `floor`: the floor plane (a, b, c, d; None: no rule); `up`: gravity-up. A relabelled
+    cluster keeps its id: it stays one object.
+    """
+    out_labels, out_clusters = labels.copy(), clusters.copy()
+    none = np.zeros(0, np.intp)
+    chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
+    if floor is None or len(chair) == 0:
+        return out_labels, out_clusters, none
+    floor = floor if float(floor[:3] @ up) >= 0 else -floor
+    pts = np.asarray(points[chair], np.float32)
+    height = pts @ floor[:3].astype(np.float32) + np.float32(floor[3])
+    uv = plane_uv(pts, floor)
+    ids = clusters[chair]
+    highest = np.full(int(ids.max()) + 1, np.inf, np.float32)
+    highest[np.unique(ids)] = -np.inf
+    np.maximum.at(highest, ids, height)
+    changed = []
+    for k in np.flatnonzero(highest < SEAT_MIN_M):
+        mine = ids == k
+        if _lid_cells(uv[mine & (height >= highest[k] - TOP_M)]) < TOP_CELLS:
+            continue  # legs: thin posts' ends
+        lo, hi = uv[mine].min(axis=0) - ABOVE_M, uv[mine].max(axis=0) + ABOVE_M
+        over = ~mine & (height > highest[k]) & np.all((uv >= lo) & (uv <= hi), axis=1)
+        if over.sum() >= ABOVE_SHARE * mine.sum():  # a chair's base under its seat
+            continue
+        out_labels[chair[mine]] = Label.CLUTTER
+        changed.append(chair[mine])
+    return out_labels, out_clusters, np.sort(np.concatenate(changed)) if changed else none
+
+
+def _lid_cells(uv: npt.NDArray[np.float32]) -> int:
+    """Return the cells of side `TOP_CELL_M` that the largest connected piece of a lid covers.
+
+    Connected: 8-connected on the grid, so four legs' ends are four pieces of one to four cells.
+    """
+    piece = connected_pieces(uv, TOP_CELL_M)
+    cells = np.unique(np.column_stack([piece, grid_of(uv, TOP_CELL_M)]), axis=0)
+    return int(np.bincount(cells[:, 0]).max())
