@@ -16,7 +16,9 @@ plane is clutter, the map's class for objects of no other class, when
 - no chair's seat lies over it: fewer than `ABOVE_SHARE` of its point count of chair points
   higher than it within `ABOVE_M` of its plan (a swivel chair's base, a star 60 cm across, has a
   lid; its seat covers it).
-A cluster made clutter keeps its id. Written here because no library labels by height over a
+A cluster made clutter keeps its id. A footstool or an ottoman under 40 cm, which the ADE20K
+network's classes count as chair (`segmentation.ade20k`), becomes clutter too: there the rule
+and the classes disagree. Written here because no library labels by height over a
 plane; the floor plane is the plane step's, the lid's pieces `plane_grid`'s.
 """
 

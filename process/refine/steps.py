@@ -31,6 +31,7 @@ from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
 from process.refine.seams import seam_vote
+from process.refine.sofas import narrow_sofas
 from process.refine.tabletop import tabletop_objects
 from process.refine.tops import left_on_tops, tops_called_seats
 from process.refine.walls import behind_walls, floor_said_low, main_floor, wall_bands
@@ -113,6 +114,8 @@ class RefineResult:
     # input indices of standing-class clusters lying flat on a wall, apart, made wall (flat.py)
     low_chairs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of chair clusters lower than a seat, part of no chair, made clutter (low.py)
+    narrow_sofas: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of sofa objects narrower than a sofa, made chair (sofas.py)
     top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices on a table's top the network calls table, left 0, given the table (tops.py)
 
@@ -168,6 +171,7 @@ class RefineResult:
         votes = np.union1d(votes, self.seats)
         votes = np.union1d(votes, np.union1d(self.tops, self.flat))
         votes = np.union1d(votes, np.union1d(self.flat_walls, self.low_chairs))
+        votes = np.union1d(votes, self.narrow_sofas)
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -331,7 +335,7 @@ def refine(
         )  # fmt: skip
         lap("legs")
     # votes by a cloud's floor plane: seats called table (legs.py), objects flat on it (flat.py),
-    # chairs lower than a seat (low.py)
+    # chairs lower than a seat (low.py), sofas narrower than a sofa (sofas.py)
     by_floor: dict[str, npt.NDArray[np.intp]] = {}
     for step, rule, on in (
         ("seats", seats_called_table, cfg.chair_seats),
@@ -383,6 +387,13 @@ def refine(
         )  # fmt: skip
         labels_iii, pieces = held.labels, held.relabelled
         lap("pieces")
+    sofas = np.zeros(0, np.intp)
+    if cfg.narrow_sofas and planes.up is not None:  # after the votes: a whole object's class
+        labels_iii, clusters_iii, sofas = narrow_sofas(
+            cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
+            planes.up,
+        )  # fmt: skip
+        lap("narrow_sofas")
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
@@ -394,6 +405,7 @@ def refine(
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
         seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"], flat_walls=on_walls,
         low_chairs=by_floor["low_chairs"], top_filled=top_filled,
+        narrow_sofas=sofas,
     )  # fmt: skip
 
 

@@ -55,7 +55,7 @@ def test_f1_over_target_classes_rises_from_phase_i_to_iii(office: SyntheticScene
     assert f1["III"] > 0.9 and f1["III"] > f1["I"] + 0.1
     assert {p.label for p in result.planes.planes} >= {2, 3}
     steps = {"planes", "sor", "dbscan", "regrowth", "raised", "legs", "seats", "tops", "seams"}
-    steps |= {"flat", "flat_walls", "pieces", "low_chairs", "fill_tops"}
+    steps |= {"flat", "flat_walls", "pieces", "low_chairs", "fill_tops", "narrow_sofas"}
     assert set(result.seconds) == steps | {"total"}
     for entry in result.dbscan.values():
         assert entry.choice is not None and entry.curves is not None
