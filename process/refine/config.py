@@ -155,6 +155,7 @@ class RefineConfig:
     low_chairs: bool = True  # a chair cluster lower than a seat, no part of a chair, is clutter
     # (low.py)
     narrow_sofas: bool = True  # a sofa object of a chair's size and shape is a chair (sofas.py)
+    tall_chairs: bool = True  # a chair cluster 1.4-2.1 m tall is a person (low.py)
     flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
     # apart from every other object, is wall (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
@@ -215,6 +216,7 @@ class RefineConfig:
             "flat_floor": False,
             "low_chairs": False,
             "narrow_sofas": False,
+            "tall_chairs": False,
             "fill_tops": False,
             "flat_walls": False,
         }

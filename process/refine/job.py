@@ -145,6 +145,7 @@ def refinement_metrics(
         "flat_on_walls": len(result.flat_walls),
         "low_chairs": len(result.low_chairs),
         "narrow_sofas": len(result.narrow_sofas),
+        "tall_chairs": len(result.tall_chairs),
         "tops_filled": len(result.top_filled),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),

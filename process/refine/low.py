@@ -1,4 +1,4 @@
-"""What the network calls chair and stands lower than any seat is clutter.
+"""A chair by its height: lower than any seat it is clutter, taller than any chair a person.
 
 A network names a low box or bin on the floor chair whole: on fused maps of simulated
 recordings a carton 39 cm tall (fresh recording 77: 1,135 points the network called floor and
@@ -18,8 +18,20 @@ plane is clutter, the map's class for objects of no other class, when
   lid; its seat covers it).
 A cluster made clutter keeps its id. A footstool or an ottoman under 40 cm, which the ADE20K
 network's classes count as chair (`segmentation.ade20k`), becomes clutter too: there the rule
-and the classes disagree. Written here because no library labels by height over a
-plane; the floor plane is the plane step's, the lid's pieces `plane_grid`'s.
+and the classes disagree.
+
+`tall_chairs`: generator 5's network names a person chair whole in most views, standing or seated
+on a sofa (44,000 points of its 14 suite clouds; clusters whose 99th height percentile over the
+floor reaches 1.44-1.70 m). No chair rises that high: the simulator's and generators' backs end
+at 0.8-1.0 m, an office chair's high back at 1.2-1.35 m, and on TUM `fr1_rpy` and slambook2
+every chair cluster's 99th percentile stays under 1.2 m. A chair cluster whose 99th height
+percentile lies between `TALL_M` and `PERSON_MAX_M` is a person, the one class of the networks'
+that stands that tall where a chair would (a tall plant called chair would be named wrong
+again); higher, it is a piece of the ceiling or a wall (generator 2's room 9: 145 points at
+2.8 m). It runs after the votes, as `sofas.narrow_sofas` does.
+
+Written here because no library labels by height over a plane; the floor plane is the plane
+step's, the lid's pieces `plane_grid`'s.
 """
 
 from __future__ import annotations
@@ -36,6 +48,8 @@ TOP_CELL_M = 0.05  # ... cover at least TOP_CELLS connected cells of this side i
 TOP_CELLS = 8
 ABOVE_M = 0.1  # chair points higher than a piece within this of its plan ...
 ABOVE_SHARE = 0.1  # ... as many as this share of its points: a seat over it
+TALL_M = 1.4  # a chair whose 99th height percentile reaches this is a person ...
+PERSON_MAX_M = 2.1  # ... up to this (higher: no person, a ceiling's or a wall's piece)
 
 
 def low_chairs(
@@ -85,3 +99,33 @@ def _lid_cells(uv: npt.NDArray[np.float32]) -> int:
     piece = connected_pieces(uv, TOP_CELL_M)
     cells = np.unique(np.column_stack([piece, grid_of(uv, TOP_CELL_M)]), axis=0)
     return int(np.bincount(cells[:, 0]).max())
+
+
+def tall_chairs(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    floor: npt.NDArray[np.float64] | None,
+    up: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
+    """Return (labels, clusters, relabelled indices) with chairs taller than a chair made person.
+
+    A chair cluster whose 99th height percentile over the floor plane lies between `TALL_M` and
+    `PERSON_MAX_M`; `floor`: the floor plane (None: no rule). Clusters keep their ids.
+    """
+    out_labels, out_clusters = labels.copy(), clusters.copy()
+    none = np.zeros(0, np.intp)
+    chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
+    if floor is None or len(chair) == 0:
+        return out_labels, out_clusters, none
+    floor = floor if float(floor[:3] @ up) >= 0 else -floor
+    height = np.asarray(points[chair], np.float32) @ floor[:3].astype(np.float32)
+    height += np.float32(floor[3])
+    order = np.argsort(clusters[chair], kind="stable")
+    groups = np.split(order, np.flatnonzero(np.diff(clusters[chair][order])) + 1)
+    tall = [g for g in groups if TALL_M <= float(np.percentile(height[g], 99.0)) <= PERSON_MAX_M]
+    if not tall:
+        return out_labels, out_clusters, none
+    rows = np.sort(chair[np.concatenate(tall)])
+    out_labels[rows] = Label.PERSON
+    return out_labels, out_clusters, rows

@@ -23,7 +23,7 @@ from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.flat import flat_on_floor, flat_on_walls
 from process.refine.inside import structure_inside_objects
 from process.refine.legs import legs_under_tables, seats_called_table
-from process.refine.low import low_chairs
+from process.refine.low import low_chairs, tall_chairs
 from process.refine.orphans import adopt_orphans, lone_objects
 from process.refine.outliers import rejoin_strays, sor_inliers
 from process.refine.pieces import piece_vote
@@ -116,6 +116,8 @@ class RefineResult:
     # input indices of chair clusters lower than a seat, part of no chair, made clutter (low.py)
     narrow_sofas: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of sofa objects narrower than a sofa, made chair (sofas.py)
+    tall_chairs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of chair clusters taller than a chair, made person (low.py)
     top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices on a table's top the network calls table, left 0, given the table (tops.py)
 
@@ -171,7 +173,7 @@ class RefineResult:
         votes = np.union1d(votes, self.seats)
         votes = np.union1d(votes, np.union1d(self.tops, self.flat))
         votes = np.union1d(votes, np.union1d(self.flat_walls, self.low_chairs))
-        votes = np.union1d(votes, self.narrow_sofas)
+        votes = np.union1d(votes, np.union1d(self.narrow_sofas, self.tall_chairs))
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -387,13 +389,19 @@ def refine(
         )  # fmt: skip
         labels_iii, pieces = held.labels, held.relabelled
         lap("pieces")
-    sofas = np.zeros(0, np.intp)
-    if cfg.narrow_sofas and planes.up is not None:  # after the votes: a whole object's class
-        labels_iii, clusters_iii, sofas = narrow_sofas(
-            cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
-            planes.up,
-        )  # fmt: skip
-        lap("narrow_sofas")
+    # after the votes, a whole object's class by its size: sofas.py, low.py
+    after: dict[str, npt.NDArray[np.intp]] = {}
+    for step, rule, on in (
+        ("narrow_sofas", narrow_sofas, cfg.narrow_sofas),
+        ("tall_chairs", tall_chairs, cfg.tall_chairs),
+    ):
+        after[step] = np.zeros(0, np.intp)
+        if on and planes.up is not None:
+            labels_iii, clusters_iii, after[step] = rule(
+                cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
+                planes.up,
+            )  # fmt: skip
+            lap(step)
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
@@ -405,7 +413,7 @@ def refine(
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
         seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"], flat_walls=on_walls,
         low_chairs=by_floor["low_chairs"], top_filled=top_filled,
-        narrow_sofas=sofas,
+        narrow_sofas=after["narrow_sofas"], tall_chairs=after["tall_chairs"],
     )  # fmt: skip
 
 
