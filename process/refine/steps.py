@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -37,6 +38,19 @@ from process.refine.tops import left_on_tops, tops_called_seats
 from process.refine.walls import behind_walls, floor_said_low, main_floor, wall_bands
 
 logger = logging.getLogger(__name__)
+
+Indices = npt.NDArray[np.intp]
+# a vote by the floor plane: (points, labels, clusters, floor, up) -> (labels, clusters, moved)
+FloorRule = Callable[
+    [
+        npt.NDArray[np.float32],
+        npt.NDArray[np.uint8],
+        npt.NDArray[np.int32],
+        npt.NDArray[np.float64] | None,
+        npt.NDArray[np.float64],
+    ],
+    tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], Indices],
+]
 
 
 @dataclass(frozen=True)
@@ -115,7 +129,7 @@ class RefineResult:
     low_chairs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of chair clusters lower than a seat, part of no chair, made clutter (low.py)
     narrow_sofas: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
-    # input indices of sofa objects narrower than a sofa, made chair (sofas.py)
+    # input indices of sofa objects of a chair's size and shape, made chair (sofas.py)
     tall_chairs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of chair clusters taller than a chair, made person (low.py)
     top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
@@ -336,21 +350,30 @@ def refine(
             planes.up, network,
         )  # fmt: skip
         lap("legs")
+    floor_model = None if floor is None else floor.model
+
+    def by_floor(rules: tuple[tuple[str, FloorRule, bool], ...]) -> dict[str, Indices]:
+        """Run each rule that is on with the floor plane; return the points each moved."""
+        nonlocal labels_iii, clusters_iii
+        moved = {}
+        for step, rule, on in rules:
+            moved[step] = np.zeros(0, np.intp)
+            if on and planes.up is not None:
+                labels_iii, clusters_iii, moved[step] = rule(
+                    cloud.points, labels_iii, clusters_iii, floor_model, planes.up
+                )
+                lap(step)
+        return moved
+
     # votes by a cloud's floor plane: seats called table (legs.py), objects flat on it (flat.py),
-    # chairs lower than a seat (low.py), sofas narrower than a sofa (sofas.py)
-    by_floor: dict[str, npt.NDArray[np.intp]] = {}
-    for step, rule, on in (
-        ("seats", seats_called_table, cfg.chair_seats),
-        ("flat", flat_on_floor, cfg.flat_floor),
-        ("low_chairs", low_chairs, cfg.low_chairs),
-    ):
-        by_floor[step] = np.zeros(0, np.intp)
-        if on and planes.up is not None:
-            labels_iii, clusters_iii, by_floor[step] = rule(
-                cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
-                planes.up,
-            )  # fmt: skip
-            lap(step)
+    # chairs lower than a seat (low.py)
+    floor_votes = by_floor(
+        (
+            ("seats", seats_called_table, cfg.chair_seats),
+            ("flat", flat_on_floor, cfg.flat_floor),
+            ("low_chairs", low_chairs, cfg.low_chairs),
+        )
+    )
     on_walls = np.zeros(0, np.intp)
     if cfg.flat_walls and planes.up is not None:
         labels_iii, clusters_iii, on_walls = flat_on_walls(
@@ -390,18 +413,12 @@ def refine(
         labels_iii, pieces = held.labels, held.relabelled
         lap("pieces")
     # after the votes, a whole object's class by its size: sofas.py, low.py
-    after: dict[str, npt.NDArray[np.intp]] = {}
-    for step, rule, on in (
-        ("narrow_sofas", narrow_sofas, cfg.narrow_sofas),
-        ("tall_chairs", tall_chairs, cfg.tall_chairs),
-    ):
-        after[step] = np.zeros(0, np.intp)
-        if on and planes.up is not None:
-            labels_iii, clusters_iii, after[step] = rule(
-                cloud.points, labels_iii, clusters_iii, None if floor is None else floor.model,
-                planes.up,
-            )  # fmt: skip
-            lap(step)
+    after = by_floor(
+        (
+            ("narrow_sofas", narrow_sofas, cfg.narrow_sofas),
+            ("tall_chairs", tall_chairs, cfg.tall_chairs),
+        )
+    )
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
@@ -411,8 +428,8 @@ def refine(
         behind_walls=n_behind, seams=seams, bare_faces=n_faces, faces_filled=filled,
         pieces=pieces, orphans=orphans, raised=raised, sunk=sunk, strays=strays_rejoined,
         enclosed=enclosed, opened=inside, legs=legs, floor_band=floor_band, lone=lone,
-        seats=by_floor["seats"], tops=on_tops, flat=by_floor["flat"], flat_walls=on_walls,
-        low_chairs=by_floor["low_chairs"], top_filled=top_filled,
+        seats=floor_votes["seats"], tops=on_tops, flat=floor_votes["flat"], flat_walls=on_walls,
+        low_chairs=floor_votes["low_chairs"], top_filled=top_filled,
         narrow_sofas=after["narrow_sofas"], tall_chairs=after["tall_chairs"],
     )  # fmt: skip
 
