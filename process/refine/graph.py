@@ -82,6 +82,12 @@ def radius_components(points: npt.NDArray[np.floating], radius: float) -> npt.ND
     return components(len(points), pairs[:, 0], pairs[:, 1])[1]
 
 
+def members(ids: npt.NDArray[np.integer]) -> list[npt.NDArray[np.intp]]:
+    """Return the positions holding each id, one array per id in ascending order of ids."""
+    order = np.argsort(ids, kind="stable")
+    return np.split(order, np.flatnonzero(np.diff(ids[order])) + 1) if len(ids) else []
+
+
 def class_pieces(
     dist: npt.NDArray[np.float64],
     nb: npt.NDArray[np.intp],

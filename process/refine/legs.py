@@ -58,7 +58,7 @@ import numpy.typing as npt
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from capture.recording import OBJECT_LABELS, Label
-from process.refine.graph import kd_tree, point_spacing, radius_components
+from process.refine.graph import kd_tree, members, point_spacing, radius_components
 from process.refine.plane_grid import over_footprint, plane_uv
 
 CELL_M = 0.05  # footprint grid of the top
@@ -226,9 +226,7 @@ def _dropped_pieces(
     left = np.flatnonzero((labels == 0) & (prior == Label.TABLE))
     if len(left) < MIN_POST:
         return []
-    piece = radius_components(pts[left], LINK * point_spacing(pts))
-    order = np.argsort(piece, kind="stable")
-    groups = np.split(left[order], np.flatnonzero(np.diff(piece[order])) + 1)
+    groups = [left[g] for g in members(radius_components(pts[left], LINK * point_spacing(pts)))]
     return [g for g in groups if len(g) >= MIN_POST]
 
 

@@ -40,7 +40,8 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Label
-from process.refine.plane_grid import connected_pieces, grid_of, plane_uv
+from process.refine.graph import members
+from process.refine.plane_grid import connected_pieces, grid_of, heights_over, plane_uv
 
 SEAT_MIN_M = 0.40  # a chair rises at least this high over the floor: its seat
 TOP_M = 0.04  # a piece's lid: its points within this of its highest ...
@@ -69,9 +70,8 @@ def low_chairs(
     chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
     if floor is None or len(chair) == 0:
         return out_labels, out_clusters, none
-    floor = floor if float(floor[:3] @ up) >= 0 else -floor
     pts = np.asarray(points[chair], np.float32)
-    height = pts @ floor[:3].astype(np.float32) + np.float32(floor[3])
+    height = heights_over(pts, floor, up)
     uv = plane_uv(pts, floor)
     ids = clusters[chair]
     highest = np.full(int(ids.max()) + 1, np.inf, np.float32)
@@ -118,12 +118,12 @@ def tall_chairs(
     chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
     if floor is None or len(chair) == 0:
         return out_labels, out_clusters, none
-    floor = floor if float(floor[:3] @ up) >= 0 else -floor
-    height = np.asarray(points[chair], np.float32) @ floor[:3].astype(np.float32)
-    height += np.float32(floor[3])
-    order = np.argsort(clusters[chair], kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(clusters[chair][order])) + 1)
-    tall = [g for g in groups if TALL_M <= float(np.percentile(height[g], 99.0)) <= PERSON_MAX_M]
+    height = heights_over(points[chair], floor, up)
+    tall = [
+        g
+        for g in members(clusters[chair])
+        if TALL_M <= float(np.percentile(height[g], 99.0)) <= PERSON_MAX_M
+    ]
     if not tall:
         return out_labels, out_clusters, none
     rows = np.sort(chair[np.concatenate(tall)])

@@ -25,6 +25,17 @@ def plane_uv(
     return uv
 
 
+def heights_over(
+    points: npt.NDArray[np.floating], floor: npt.NDArray[np.float64], up: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float32]:
+    """Return each point's height over a plane (a, b, c, d), its normal turned to face `up`."""
+    normal = floor if float(floor[:3] @ up) >= 0 else -floor
+    heights: npt.NDArray[np.float32] = np.asarray(points, np.float32) @ normal[:3].astype(
+        np.float32
+    ) + np.float32(normal[3])
+    return heights
+
+
 def grid_of(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]:
     """Return each point's (i, j) cell of side `cell_m`, counted from the lowest corner."""
     if len(uv) == 0:

@@ -31,8 +31,8 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from capture.recording import Label
-from process.refine.graph import kd_tree, radius_components
-from process.refine.plane_grid import plane_uv
+from process.refine.graph import kd_tree, members, radius_components
+from process.refine.plane_grid import heights_over, plane_uv
 
 CHAIR_MAX_M = 0.8  # a chair fits in a square of this side in plan
 SOFA_MIN_M = 1.0  # a sofa is at least this long
@@ -59,13 +59,9 @@ def narrow_sofas(
     if floor is None or len(sofa) == 0:
         return out_labels, out_clusters, none
     pts = np.asarray(points[sofa], np.float32)
-    piece = radius_components(pts, LINK_M)
+    groups = members(radius_components(pts, LINK_M))
     uv = plane_uv(pts, floor)
-    order = np.argsort(piece, kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(piece[order])) + 1)
-    height = pts @ floor[:3].astype(np.float32) + np.float32(floor[3])
-    if float(floor[:3] @ up) < 0:
-        height = -height
+    height = heights_over(pts, floor, up)
     lengths = [_length(uv[g]) for g in groups]
     narrow = [
         g

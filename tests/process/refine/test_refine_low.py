@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
+import pytest
 from helpers_refine import UP, box_on_floor, counted_shown_and_switched_off, grid_patch, labelled
 
 from capture.recording import Label
@@ -83,31 +84,6 @@ def test_a_swivel_base_is_clutter_only_without_its_seat_over_it() -> None:
     assert np.array_equal(changed, np.flatnonzero(np.isin(clusters, [1, 4, 6])))
 
 
-def test_the_refinement_makes_a_carton_called_chair_clutter() -> None:
-    """The whole refinement on a 4 x 4 m floor, a 40 x 40 x 35 cm carton the network calls chair
-    whole, and a chair on legs 1 m from it: DBSCAN keeps the carton a chair, only the low rule
-    makes it clutter (counted in metrics.json, shown with the votes); the chair stays a chair.
-    Without the rule (as in `paper()`) the carton stays a chair."""
-    rng = np.random.default_rng(0)
-    floor = grid_patch((-2.0, 2.0), (-2.0, 2.0), step=0.02)
-    carton = box_on_floor(-1.0, -1.0, 0.4, 0.35)
-    chair = np.concatenate([_legs(0.5, 0.5, 0.42), _seat_and_back(0.5, 0.5)])
-    points = np.concatenate([floor, carton, chair])
-    labels = np.repeat(
-        np.array([FLOOR, CHAIR, CHAIR], np.uint8), [len(floor), len(carton), len(chair)]
-    )
-    cloud = labelled(points + rng.normal(0.0, 0.002, points.shape).astype(np.float32), labels)
-    on_carton = len(floor) + np.arange(len(carton))
-    result = refine(cloud, RefineConfig(), up=UP)
-    kept = on_carton[result.labels_ii[on_carton] == CHAIR]  # DBSCAN keeps it a chair ...
-    assert len(kept) >= 0.8 * len(on_carton)
-    assert (result.labels_iii[kept] == CLUTTER).all()  # ... the low rule makes it clutter
-    assert np.isin(kept, result.low_chairs).all()
-    chair_points = np.arange(len(floor) + len(carton), len(points))
-    assert (result.labels_iii[chair_points] == CHAIR).mean() > 0.95
-    counted_shown_and_switched_off(cloud, result, kept, "low_chairs", "low_chairs", "low_chairs")
-
-
 def test_a_chair_taller_than_a_chair_becomes_a_person() -> None:
     """On a floor plane at z = 0 (its normal pointing down), all called chair: someone standing
     (a 40 x 30 cm column 1.75 m tall, cluster 1), a chair (2), a high-backed chair to 1.38 m (3),
@@ -135,26 +111,36 @@ def test_a_chair_taller_than_a_chair_becomes_a_person() -> None:
     assert len(tall_chairs(points, labels, clusters, None, UP)[2]) == 0  # no floor: no rule
 
 
-def test_the_refinement_makes_someone_standing_called_chair_a_person() -> None:
-    """The whole refinement on a 4 x 4 m floor, someone standing (a 40 x 30 cm column 1.75 m
-    tall) the network calls chair whole, and a chair 1 m away: DBSCAN keeps them chairs, only
-    the height rule makes the column a person (counted in metrics.json, shown with the votes);
-    the chair stays a chair. Without the rule (as in `paper()`) the column stays a chair."""
+@pytest.mark.parametrize(
+    ("thing", "becomes", "field"),
+    [
+        (box_on_floor(-1.0, -1.0, 0.4, 0.35), CLUTTER, "low_chairs"),  # a carton
+        (box_on_floor(-1.0, -1.0, 0.35, 1.75), PERSON, "tall_chairs"),  # someone standing
+    ],
+    ids=["carton", "standing"],
+)
+def test_the_refinement_gives_a_thing_called_chair_its_class_by_height(
+    thing: Points, becomes: Label, field: str
+) -> None:
+    """The whole refinement on a 4 x 4 m floor, a chair on legs, and 1 m from it a thing the
+    network calls chair whole: a 40 x 40 x 35 cm carton, or someone standing (a 35 cm column
+    1.75 m tall). DBSCAN keeps it a chair; only the height rule gives it its class, clutter or
+    person (counted in metrics.json, shown with the votes); the chair stays a chair. Without the
+    rule (as in `paper()`) the thing stays a chair."""
     rng = np.random.default_rng(0)
     floor = grid_patch((-2.0, 2.0), (-2.0, 2.0), step=0.02)
-    standing = box_on_floor(-1.0, -1.0, 0.35, 1.75)
     chair = np.concatenate([_legs(0.5, 0.5, 0.42), _seat_and_back(0.5, 0.5)])
-    points = np.concatenate([floor, standing, chair])
+    points = np.concatenate([floor, thing, chair])
     labels = np.repeat(
-        np.array([FLOOR, CHAIR, CHAIR], np.uint8), [len(floor), len(standing), len(chair)]
+        np.array([FLOOR, CHAIR, CHAIR], np.uint8), [len(floor), len(thing), len(chair)]
     )
     cloud = labelled(points + rng.normal(0.0, 0.002, points.shape).astype(np.float32), labels)
-    on_standing = len(floor) + np.arange(len(standing))
+    on_thing = len(floor) + np.arange(len(thing))
     result = refine(cloud, RefineConfig(), up=UP)
-    kept = on_standing[result.labels_ii[on_standing] == CHAIR]  # DBSCAN keeps it a chair ...
-    assert len(kept) >= 0.8 * len(on_standing)
-    assert (result.labels_iii[kept] == PERSON).all()  # ... the height rule makes it a person
-    assert np.isin(kept, result.tall_chairs).all()
-    chair_points = np.arange(len(floor) + len(standing), len(points))
+    kept = on_thing[result.labels_ii[on_thing] == CHAIR]  # DBSCAN keeps it a chair ...
+    assert len(kept) >= 0.8 * len(on_thing)
+    assert (result.labels_iii[kept] == becomes).all()  # ... the height rule gives its class
+    assert np.isin(kept, getattr(result, field)).all()
+    chair_points = np.arange(len(floor) + len(thing), len(points))
     assert (result.labels_iii[chair_points] == CHAIR).mean() > 0.95
-    counted_shown_and_switched_off(cloud, result, kept, "tall_chairs", "tall_chairs", "tall_chairs")
+    counted_shown_and_switched_off(cloud, result, kept, field, field, field)
