@@ -105,6 +105,7 @@ def _generator_rows() -> list[Row]:
         ("gen 4 uniform-sampled office", lambda: gen4_scene(seed=4, object_points=200_000)),
         ("gen 4 kitchen", lambda: gen4_scene(seed=1, object_points=60_000)),
         ("gen 4 meeting room", lambda: gen4_scene(seed=11, object_points=500_000)),
+        ("gen 4 living room, its sofas", lambda: gen4_scene(seed=10, object_points=500_000)),
     ]  # fmt: skip
     rows = []
     for name, make in clouds:
