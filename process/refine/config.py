@@ -156,6 +156,7 @@ class RefineConfig:
     # (low.py)
     narrow_sofas: bool = True  # a sofa object of a chair's size and shape is a chair (sofas.py)
     tall_chairs: bool = True  # a chair cluster 1.4-2.1 m tall is a person (low.py)
+    screens: bool = True  # a thin upright clutter panel off the floor is a screen (screens.py)
     flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
     # apart from every other object, is wall (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
@@ -217,6 +218,7 @@ class RefineConfig:
             "low_chairs": False,
             "narrow_sofas": False,
             "tall_chairs": False,
+            "screens": False,
             "fill_tops": False,
             "flat_walls": False,
         }

@@ -146,6 +146,7 @@ def refinement_metrics(
         "low_chairs": len(result.low_chairs),
         "narrow_sofas": len(result.narrow_sofas),
         "tall_chairs": len(result.tall_chairs),
+        "screens": len(result.screens),
         "tops_filled": len(result.top_filled),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),

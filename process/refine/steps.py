@@ -31,6 +31,7 @@ from process.refine.pieces import piece_vote
 from process.refine.planes import PlaneSegmentation, segment_planes
 from process.refine.raised import raised_off_tables
 from process.refine.regrowth import regrow
+from process.refine.screens import flat_screens
 from process.refine.seams import seam_vote
 from process.refine.sofas import narrow_sofas
 from process.refine.tabletop import tabletop_objects
@@ -132,6 +133,8 @@ class RefineResult:
     # input indices of sofa objects of a chair's size and shape, made chair (sofas.py)
     tall_chairs: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of chair clusters taller than a chair, made person (low.py)
+    screens: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices of clutter clusters shaped as a screen, made tv_monitor (screens.py)
     top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices on a table's top the network calls table, left 0, given the table (tops.py)
 
@@ -188,6 +191,7 @@ class RefineResult:
         votes = np.union1d(votes, np.union1d(self.tops, self.flat))
         votes = np.union1d(votes, np.union1d(self.flat_walls, self.low_chairs))
         votes = np.union1d(votes, np.union1d(self.narrow_sofas, self.tall_chairs))
+        votes = np.union1d(votes, self.screens)
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -412,11 +416,12 @@ def refine(
         )  # fmt: skip
         labels_iii, pieces = held.labels, held.relabelled
         lap("pieces")
-    # after the votes, a whole object's class by its size: sofas.py, low.py
+    # after the votes, a whole object's class by its size and shape: sofas.py, low.py, screens.py
     after = by_floor(
         (
             ("narrow_sofas", narrow_sofas, cfg.narrow_sofas),
             ("tall_chairs", tall_chairs, cfg.tall_chairs),
+            ("screens", flat_screens, cfg.screens),
         )
     )
     seconds["total"] = time.perf_counter() - start
@@ -431,6 +436,7 @@ def refine(
         seats=floor_votes["seats"], tops=on_tops, flat=floor_votes["flat"], flat_walls=on_walls,
         low_chairs=floor_votes["low_chairs"], top_filled=top_filled,
         narrow_sofas=after["narrow_sofas"], tall_chairs=after["tall_chairs"],
+        screens=after["screens"],
     )  # fmt: skip
 
 
