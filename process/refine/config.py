@@ -157,6 +157,8 @@ class RefineConfig:
     narrow_sofas: bool = True  # a sofa object of a chair's size and shape is a chair (sofas.py)
     tall_chairs: bool = True  # a chair cluster 1.4-2.1 m tall is a person (low.py)
     screens: bool = True  # a thin upright clutter panel off the floor is a screen (screens.py)
+    beyond_feet: bool = True  # what regrowth gave a screen or clutter on the level surface it
+    # stands on, beyond its foot, is given back (footing.py)
     flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
     # apart from every other object, is wall (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
@@ -219,6 +221,7 @@ class RefineConfig:
             "narrow_sofas": False,
             "tall_chairs": False,
             "screens": False,
+            "beyond_feet": False,
             "fill_tops": False,
             "flat_walls": False,
         }

@@ -147,6 +147,7 @@ def refinement_metrics(
         "narrow_sofas": len(result.narrow_sofas),
         "tall_chairs": len(result.tall_chairs),
         "screens": len(result.screens),
+        "beyond_feet": len(result.beyond_feet),
         "tops_filled": len(result.top_filled),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),

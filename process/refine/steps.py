@@ -22,6 +22,7 @@ from process.refine.config import RefineConfig
 from process.refine.dbscan import DbscanChoice, KannCurves, dbscan, estimate_parameters, query_size
 from process.refine.faces import bare_faces, enclosed_faces, fill_faces
 from process.refine.flat import flat_on_floor, flat_on_walls
+from process.refine.footing import beyond_feet
 from process.refine.inside import structure_inside_objects
 from process.refine.legs import legs_under_tables, seats_called_table
 from process.refine.low import low_chairs, tall_chairs
@@ -135,6 +136,9 @@ class RefineResult:
     # input indices of chair clusters taller than a chair, made person (low.py)
     screens: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices of clutter clusters shaped as a screen, made tv_monitor (screens.py)
+    beyond_feet: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices regrowth gave a screen or clutter on the level surface under it, beyond its
+    # foot, given back (footing.py)
     top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices on a table's top the network calls table, left 0, given the table (tops.py)
 
@@ -191,7 +195,7 @@ class RefineResult:
         votes = np.union1d(votes, np.union1d(self.tops, self.flat))
         votes = np.union1d(votes, np.union1d(self.flat_walls, self.low_chairs))
         votes = np.union1d(votes, np.union1d(self.narrow_sofas, self.tall_chairs))
-        votes = np.union1d(votes, self.screens)
+        votes = np.union1d(votes, np.union1d(self.screens, self.beyond_feet))
         return cloud.select(votes)
 
     def regrown_cloud(self) -> LabelledCloud:
@@ -217,7 +221,7 @@ def refine(
     def lap(step: str) -> None:
         nonlocal tick
         now = time.perf_counter()
-        seconds[step], tick = now - tick, now
+        seconds[step], tick = seconds.get(step, 0.0) + now - tick, now  # a step may come twice
 
     planes = segment_planes(cloud.points, cfg, up=up, labels=cloud.labels)
     network = planes.object_labels(cloud.labels)  # phase I, table surfaces made table
@@ -248,7 +252,7 @@ def refine(
     labels, clusters = np.where(opened, 0, labels), np.where(opened, 0, clusters)
     regrown, r2, adopted, above, rejoined = np.zeros(0, np.intp), {}, np.zeros(0, np.intp), 0, 0
     n_behind = n_faces = 0
-    filled = orphans = lone = strays_rejoined = enclosed = np.zeros(0, np.intp)
+    filled = orphans = lone = strays_rejoined = enclosed = off_feet = np.zeros(0, np.intp)
     tabletop = floor_band = np.zeros(0, np.intp)
     growable = None  # the points regrowth could label (None: no regrowth)
     if cfg.regrowth:
@@ -335,6 +339,13 @@ def refine(
                 crown_min=crown_min,
             )  # fmt: skip
             regrown = np.union1d(regrown, strays_rejoined)  # shown with the regrown points
+        if cfg.beyond_feet and planes.up is not None:  # a screen ends at its foot (footing.py)
+            lap("regrowth")  # the growth so far; the floor band's after it counts there too
+            off_feet = beyond_feet(cloud.points, labels_iii, clusters_iii, regrown, planes.up)
+            back = off_feet  # to what they were before regrowth: unlabelled
+            labels_iii[back], clusters_iii[back] = labels_ii[back], clusters_ii[back]
+            regrown = np.setdiff1d(regrown, off_feet)
+            lap("beyond_feet")
         left = objects[low & (labels_iii[objects] == 0)]  # no object took them: floor again
         labels_iii[left], clusters_iii[left] = labels_ii[left], clusters_ii[left]
         floor_band = objects[low & np.isin(labels_iii[objects], OBJECT_LABELS)]
@@ -436,7 +447,7 @@ def refine(
         seats=floor_votes["seats"], tops=on_tops, flat=floor_votes["flat"], flat_walls=on_walls,
         low_chairs=floor_votes["low_chairs"], top_filled=top_filled,
         narrow_sofas=after["narrow_sofas"], tall_chairs=after["tall_chairs"],
-        screens=after["screens"],
+        screens=after["screens"], beyond_feet=off_feet,
     )  # fmt: skip
 
 
