@@ -188,7 +188,8 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points every vote after regrowth relabelled (seams.py to flat.py)."""
+        """Return the points every vote after regrowth relabelled (seams.py to screens.py), and
+        those regrowth gave that footing.py gave back: the .rrd's votes entity."""
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
         votes = np.union1d(votes, self.seats)
