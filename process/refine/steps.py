@@ -188,8 +188,10 @@ class RefineResult:
         return self.fused.with_labels(self.labels_ii, clusters=self.clusters_ii).select(keep)
 
     def seam_cloud(self) -> LabelledCloud:
-        """Return the points every vote after regrowth relabelled (seams.py to screens.py), and
-        those regrowth gave that footing.py gave back: the .rrd's votes entity."""
+        """Return the points the votes after regrowth relabelled: the .rrd's votes entity.
+
+        The votes are seams.py's to screens.py's; the points footing.py gave back are shown too.
+        """
         cloud = self.fused.with_labels(self.labels_iii, clusters=self.clusters_iii)
         votes = np.union1d(np.union1d(self.seams, self.pieces), np.union1d(self.raised, self.legs))
         votes = np.union1d(votes, self.seats)
