@@ -88,6 +88,24 @@ def members(ids: npt.NDArray[np.integer]) -> list[npt.NDArray[np.intp]]:
     return np.split(order, np.flatnonzero(np.diff(ids[order])) + 1) if len(ids) else []
 
 
+def relabelled(
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    rows: npt.NDArray[np.intp],
+    groups: list[npt.NDArray[np.intp]],
+    label: int,
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
+    """Return (labels, clusters, moved) with the points `rows[g]` of each group `g` given `label`.
+
+    Copies; the clusters are kept (an object named anew stays one object) and `moved` is
+    sorted: the answer of a rule that names whole objects anew (steps.FloorRule).
+    """
+    moved = np.sort(rows[np.concatenate(groups)]) if groups else np.zeros(0, np.intp)
+    out = labels.copy()
+    out[moved] = label
+    return out, clusters.copy(), moved
+
+
 def class_pieces(
     dist: npt.NDArray[np.float64],
     nb: npt.NDArray[np.intp],

@@ -40,8 +40,8 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Label
-from process.refine.graph import members
-from process.refine.plane_grid import connected_pieces, grid_of, heights_over, plane_uv
+from process.refine.graph import members, relabelled
+from process.refine.plane_grid import connected_pieces, grid_of, over_floor
 
 SEAT_MIN_M = 0.40  # a chair rises at least this high over the floor: its seat
 TOP_M = 0.04  # a piece's lid: its points within this of its highest ...
@@ -65,30 +65,22 @@ def low_chairs(
     `floor`: the floor plane (a, b, c, d; None: no rule); `up`: gravity-up. A relabelled
     cluster keeps its id: it stays one object.
     """
-    out_labels, out_clusters = labels.copy(), clusters.copy()
-    none = np.zeros(0, np.intp)
-    chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
-    if floor is None or len(chair) == 0:
-        return out_labels, out_clusters, none
-    pts = np.asarray(points[chair], np.float32)
-    height = heights_over(pts, floor, up)
-    uv = plane_uv(pts, floor)
-    ids = clusters[chair]
-    highest = np.full(int(ids.max()) + 1, np.inf, np.float32)
-    highest[np.unique(ids)] = -np.inf
-    np.maximum.at(highest, ids, height)
-    changed = []
-    for k in np.flatnonzero(highest < SEAT_MIN_M):
-        mine = ids == k
-        if _lid_cells(uv[mine & (height >= highest[k] - TOP_M)]) < TOP_CELLS:
-            continue  # legs: thin posts' ends
-        lo, hi = uv[mine].min(axis=0) - ABOVE_M, uv[mine].max(axis=0) + ABOVE_M
-        over = ~mine & (height > highest[k]) & np.all((uv >= lo) & (uv <= hi), axis=1)
-        if over.sum() >= ABOVE_SHARE * mine.sum():  # a chair's base under its seat
+    chair = over_floor(points, labels, clusters, Label.CHAIR, floor, up)
+    height, uv = chair.height, chair.uv
+    clutter = []
+    for g in members(clusters[chair.rows]):
+        top = height[g].max()
+        if top >= SEAT_MIN_M:
             continue
-        out_labels[chair[mine]] = Label.CLUTTER
-        changed.append(chair[mine])
-    return out_labels, out_clusters, np.sort(np.concatenate(changed)) if changed else none
+        if _lid_cells(uv[g][height[g] >= top - TOP_M]) < TOP_CELLS:
+            continue  # legs: thin posts' ends
+        lo, hi = uv[g].min(axis=0) - ABOVE_M, uv[g].max(axis=0) + ABOVE_M
+        over = (height > top) & np.all((uv >= lo) & (uv <= hi), axis=1)
+        over[g] = False
+        if over.sum() >= ABOVE_SHARE * len(g):  # a chair's base under its seat
+            continue
+        clutter.append(g)
+    return relabelled(labels, clusters, chair.rows, clutter, Label.CLUTTER)
 
 
 def _lid_cells(uv: npt.NDArray[np.float32]) -> int:
@@ -113,19 +105,10 @@ def tall_chairs(
     A chair cluster whose 99th height percentile over the floor plane lies between `TALL_M` and
     `PERSON_MAX_M`; `floor`: the floor plane (None: no rule). Clusters keep their ids.
     """
-    out_labels, out_clusters = labels.copy(), clusters.copy()
-    none = np.zeros(0, np.intp)
-    chair = np.flatnonzero((labels == Label.CHAIR) & (clusters > 0))
-    if floor is None or len(chair) == 0:
-        return out_labels, out_clusters, none
-    height = heights_over(points[chair], floor, up)
+    chair = over_floor(points, labels, clusters, Label.CHAIR, floor, up)
     tall = [
         g
-        for g in members(clusters[chair])
-        if TALL_M <= float(np.percentile(height[g], 99.0)) <= PERSON_MAX_M
+        for g in members(clusters[chair.rows])
+        if TALL_M <= float(np.percentile(chair.height[g], 99.0)) <= PERSON_MAX_M
     ]
-    if not tall:
-        return out_labels, out_clusters, none
-    rows = np.sort(chair[np.concatenate(tall)])
-    out_labels[rows] = Label.PERSON
-    return out_labels, out_clusters, rows
+    return relabelled(labels, clusters, chair.rows, tall, Label.PERSON)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
@@ -34,6 +36,37 @@ def heights_over(
         np.float32
     ) + np.float32(normal[3])
     return heights
+
+
+@dataclass(frozen=True)
+class OverFloor:
+    """One class's clustered points, measured over the floor plane (`over_floor`)."""
+
+    rows: npt.NDArray[np.intp]  # their indices in the cloud
+    points: npt.NDArray[np.float32]  # (n, 3) their positions
+    height: npt.NDArray[np.float32]  # (n,) over the floor plane
+    uv: npt.NDArray[np.float32]  # (n, 2) in plan: along the floor plane's axes
+
+
+def over_floor(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    label: int,
+    floor: npt.NDArray[np.float64] | None,
+    up: npt.NDArray[np.float64],
+) -> OverFloor:
+    """Return the clustered points of `label` with their heights and plan coordinates.
+
+    Heights are over the floor plane (a, b, c, d); none are returned without one (`floor` None).
+    """
+    rows = np.flatnonzero((labels == label) & (clusters > 0))
+    if floor is None:
+        rows = rows[:0]
+    pts = np.asarray(points[rows], np.float32)
+    if floor is None:
+        return OverFloor(rows, pts, np.zeros(0, np.float32), np.zeros((0, 2), np.float32))
+    return OverFloor(rows, pts, heights_over(pts, floor, up), plane_uv(pts, floor))
 
 
 def grid_of(uv: npt.NDArray[np.float32], cell_m: float) -> npt.NDArray[np.int64]:

@@ -33,8 +33,8 @@ import numpy as np
 import numpy.typing as npt
 
 from capture.recording import Label
-from process.refine.graph import members
-from process.refine.plane_grid import heights_over, plane_uv
+from process.refine.graph import members, relabelled
+from process.refine.plane_grid import over_floor
 
 THICK_M = 0.09  # a screen's depth, its stand included (2nd-98th percentile) at most ...
 WIDE_M = (0.4, 2.0)  # ... its width along the floor ...
@@ -60,26 +60,15 @@ def flat_screens(
 
     `floor`: the floor plane (a, b, c, d; None: no rule); `up`: gravity-up. Clusters keep ids.
     """
-    out_labels, out_clusters = labels.copy(), clusters.copy()
-    none = np.zeros(0, np.intp)
-    clutter = np.flatnonzero((labels == Label.CLUTTER) & (clusters > 0))
-    if floor is None or len(clutter) == 0:
-        return out_labels, out_clusters, none
-    pts = np.asarray(points[clutter], np.float32)
-    height = heights_over(pts, floor, up)
-    uv = plane_uv(pts, floor)
+    clutter = over_floor(points, labels, clusters, Label.CLUTTER, floor, up)
     screens = [
         g
-        for g in members(clusters[clutter])
+        for g in members(clusters[clutter.rows])
         if len(g) >= MIN_POINTS
-        and float(np.percentile(height[g], 1.0)) >= RAISED_M
-        and is_screen(uv[g], height[g])
+        and float(np.percentile(clutter.height[g], 1.0)) >= RAISED_M
+        and is_screen(clutter.uv[g], clutter.height[g])
     ]
-    if not screens:
-        return out_labels, out_clusters, none
-    rows = np.sort(clutter[np.concatenate(screens)])
-    out_labels[rows] = Label.TV_MONITOR
-    return out_labels, out_clusters, rows
+    return relabelled(labels, clusters, clutter.rows, screens, Label.TV_MONITOR)
 
 
 def is_screen(uv: npt.NDArray[np.float32], height: npt.NDArray[np.float32]) -> bool:

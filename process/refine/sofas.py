@@ -35,8 +35,8 @@ from scipy.spatial import cKDTree
 
 from capture.recording import Label
 from process.refine.cells import voxel_cells
-from process.refine.graph import kd_tree, members, radius_components
-from process.refine.plane_grid import heights_over, plane_uv
+from process.refine.graph import kd_tree, members, radius_components, relabelled
+from process.refine.plane_grid import over_floor
 
 CHAIR_MAX_M = 0.8  # a chair fits in a square of this side in plan
 SOFA_MIN_M = 1.0  # a sofa is at least this long
@@ -58,16 +58,12 @@ def narrow_sofas(
 
     `floor`: the floor plane (None: no rule); `up`: gravity-up. Clusters keep their ids.
     """
-    out_labels, out_clusters = labels.copy(), clusters.copy()
-    none = np.zeros(0, np.intp)
-    sofa = np.flatnonzero((labels == Label.SOFA) & (clusters > 0))
-    if floor is None or len(sofa) == 0:
-        return out_labels, out_clusters, none
-    pts = np.asarray(points[sofa], np.float32)
+    sofa = over_floor(points, labels, clusters, Label.SOFA, floor, up)
+    pts, uv, height = sofa.points, sofa.uv, sofa.height
+    if len(pts) == 0:
+        return relabelled(labels, clusters, sofa.rows, [], Label.CHAIR)
     cells, cell_of = voxel_cells(pts, CELL_M)  # a dense sofa's pairs within LINK_M are many
     groups = members(radius_components(cells, LINK_M)[cell_of])
-    uv = plane_uv(pts, floor)
-    height = heights_over(pts, floor, up)
     lengths = [_length(uv[g]) for g in groups]
     narrow = [
         g
@@ -75,7 +71,7 @@ def narrow_sofas(
         if long < CHAIR_MAX_M and _seat_and_back(height[g])
     ]
     if not narrow:
-        return out_labels, out_clusters, none
+        return relabelled(labels, clusters, sofa.rows, [], Label.CHAIR)
     long_sofas = [g for g, long in zip(groups, lengths, strict=True) if long >= SOFA_MIN_M]
     tree = kd_tree(pts[np.concatenate(long_sofas)]) if long_sofas else None
 
@@ -86,7 +82,7 @@ def narrow_sofas(
 
     chairs = [g for g in narrow if not near(g, tree)]  # not a piece of a sofa
     if not chairs:
-        return out_labels, out_clusters, none
+        return relabelled(labels, clusters, sofa.rows, [], Label.CHAIR)
     # the rest of each chair: its base or legs, short, by it and by no sofa
     made = kd_tree(pts[np.concatenate(chairs)])
     taken = {id(g) for g in chairs}
@@ -95,9 +91,7 @@ def narrow_sofas(
         for g, long in zip(groups, lengths, strict=True)
         if id(g) not in taken and long < SOFA_MIN_M and near(g, made) and not near(g, tree)
     ]
-    rows = sofa[np.concatenate(chairs)]
-    out_labels[rows] = Label.CHAIR
-    return out_labels, out_clusters, np.sort(rows)
+    return relabelled(labels, clusters, sofa.rows, chairs, Label.CHAIR)
 
 
 def _length(uv: npt.NDArray[np.float32]) -> float:
