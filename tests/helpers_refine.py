@@ -17,6 +17,7 @@ from process.refine.job import refinement_metrics
 from viz.logger import NullLogger
 
 UP = np.array([0.0, 0.0, 1.0])  # gravity-up of the small test clouds
+FLOOR_Z0 = np.array([0.0, 0.0, -1.0, 0.0])  # the plane z = 0, its normal down as RANSAC may give it
 
 
 def literal_dbscan(
@@ -126,6 +127,17 @@ class RecordingLogger(NullLogger):
             calls.append((method, first, kwargs))
 
         return record
+
+
+def clustered(
+    parts: list[npt.NDArray[np.floating]], labels: npt.ArrayLike
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8], npt.NDArray[np.int32]]:
+    """Return (points, labels, clusters): the parts as one cloud, part i labelled `labels[i]`
+    (one label: all of them) and in cluster i + 1."""
+    sizes = [len(p) for p in parts]
+    names = np.broadcast_to(np.asarray(labels, np.uint8), (len(parts),))
+    clusters = np.repeat(np.arange(1, len(parts) + 1, dtype=np.int32), sizes)
+    return np.concatenate(parts).astype(np.float32), np.repeat(names, sizes), clusters
 
 
 def box_on_floor(x: float, y: float, size: float, height: float) -> npt.NDArray[np.float32]:

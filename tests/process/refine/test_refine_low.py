@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pytest
-from helpers_refine import UP, box_on_floor, counted_shown_and_switched_off, grid_patch, labelled
+from helpers_refine import (
+    FLOOR_Z0,
+    UP,
+    box_on_floor,
+    clustered,
+    counted_shown_and_switched_off,
+    grid_patch,
+    labelled,
+)
 
 from capture.recording import Label
 from process.refine import RefineConfig, refine
@@ -49,10 +57,8 @@ def _scene() -> tuple[Points, npt.NDArray[np.uint8], npt.NDArray[np.int32], list
         box_on_floor(5.0, 0.0, 0.5, 0.38),  # 7: a coffee table
         box_on_floor(6.0, 0.0, 0.4, 0.46),  # 8: a stool 46 cm tall
     ]
-    sizes = [len(p) for p in parts]
-    labels = np.repeat(np.array([CHAIR] * 6 + [TABLE, CHAIR], np.uint8), sizes)
-    clusters = np.repeat(np.arange(1, 9, dtype=np.int32), sizes)
-    return np.concatenate(parts).astype(np.float32), labels, clusters, parts
+    points, labels, clusters = clustered(parts, [CHAIR] * 6 + [TABLE, CHAIR])
+    return points, labels, clusters, parts
 
 
 def test_a_chair_lower_than_a_seat_with_a_lid_and_no_seat_over_it_becomes_clutter() -> None:
@@ -61,8 +67,7 @@ def test_a_chair_lower_than_a_seat_with_a_lid_and_no_seat_over_it_becomes_clutte
     seat (3: four posts' ends, no lid), the swivel base under its seat (4), the seat (5), the
     coffee table (7, no chair) and the stool (8, as high as a seat) stay."""
     points, labels, clusters, _ = _scene()
-    floor = np.array([0.0, 0.0, -1.0, 0.0])
-    out, ids, changed = low_chairs(points, labels, clusters, floor, UP)
+    out, ids, changed = low_chairs(points, labels, clusters, FLOOR_Z0, UP)
     boxes = np.flatnonzero(np.isin(clusters, [1, 6]))
     assert np.array_equal(changed, boxes)
     assert (out[boxes] == CLUTTER).all() and np.array_equal(ids, clusters)
@@ -70,7 +75,7 @@ def test_a_chair_lower_than_a_seat_with_a_lid_and_no_seat_over_it_becomes_clutte
     assert np.array_equal(out[rest], labels[rest])
     assert (labels[boxes] == CHAIR).all()  # the input is not changed in place
     assert len(low_chairs(points, labels, clusters, None, UP)[2]) == 0  # no floor: no rule
-    lower = floor - np.array([0.0, 0.0, 0.0, 0.1])  # the floor 10 cm lower: all reach a seat
+    lower = FLOOR_Z0 - np.array([0.0, 0.0, 0.0, 0.1])  # the floor 10 cm lower: all reach a seat
     assert len(low_chairs(points, labels, clusters, lower, UP)[2]) == 0
 
 
@@ -97,12 +102,8 @@ def test_a_chair_taller_than_a_chair_becomes_a_person() -> None:
         grid_patch((3.0, 3.5), (0.0, 0.5), z=2.8, step=0.02),
         box_on_floor(4.0, 0.0, 0.35, 0.45) + np.array([0.0, 0.0, 1.0], np.float32),
     ]
-    sizes = [len(p) for p in parts]
-    points = np.concatenate(parts).astype(np.float32)
-    labels = np.full(len(points), CHAIR, np.uint8)
-    clusters = np.repeat(np.arange(1, 6, dtype=np.int32), sizes)
-    floor = np.array([0.0, 0.0, -1.0, 0.0])
-    out, ids, changed = tall_chairs(points, labels, clusters, floor, UP)
+    points, labels, clusters = clustered(parts, CHAIR)
+    out, ids, changed = tall_chairs(points, labels, clusters, FLOOR_Z0, UP)
     people = np.flatnonzero(np.isin(clusters, [1, 5]))
     assert np.array_equal(changed, people)
     assert (out[people] == PERSON).all() and np.array_equal(ids, clusters)

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pytest
-from helpers_refine import UP, box_on_floor, counted_shown_and_switched_off, grid_patch, labelled
+from helpers_refine import (
+    FLOOR_Z0,
+    UP,
+    box_on_floor,
+    counted_shown_and_switched_off,
+    grid_patch,
+    labelled,
+)
 
 from capture.recording import Label
 from process.refine import RefineConfig, refine
@@ -14,7 +21,6 @@ from process.refine.screens import flat_screens
 CLUTTER, SCREEN, CHAIR = Label.CLUTTER, Label.TV_MONITOR, Label.CHAIR
 TABLE, FLOOR = Label.TABLE, Label.FLOOR
 Points = npt.NDArray[np.float32]
-FLOOR_PLANE = np.array([0.0, 0.0, -1.0, 0.0])  # z = 0, its normal pointing down
 
 
 def _panel(width: float, height: float, *, depth: float = 0.03, bottom: float = 0.9) -> Points:
@@ -73,7 +79,7 @@ def test_a_clutter_panel_is_a_screen_by_its_shape(thing: Points, screen: bool) -
     points = np.concatenate(parts).astype(np.float32)
     labels = np.repeat(np.array([CLUTTER, CLUTTER, CHAIR], np.uint8), [len(p) for p in parts])
     clusters = np.repeat(np.array([3, 4, 5], np.int32), [len(p) for p in parts])
-    out, ids, changed = flat_screens(points, labels, clusters, FLOOR_PLANE, UP)
+    out, ids, changed = flat_screens(points, labels, clusters, FLOOR_Z0, UP)
     mine = np.flatnonzero(clusters == 3)
     assert np.array_equal(changed, mine if screen else np.zeros(0, np.intp))
     assert (out[mine] == (SCREEN if screen else CLUTTER)).all()
@@ -94,7 +100,7 @@ def test_a_screen_turned_any_way_about_up_is_a_screen() -> None:
         points = turned.astype(np.float32)
         labels = np.full(len(points), CLUTTER, np.uint8)
         clusters = np.ones(len(points), np.int32)
-        assert len(flat_screens(points, labels, clusters, FLOOR_PLANE, UP)[2]) == len(points)
+        assert len(flat_screens(points, labels, clusters, FLOOR_Z0, UP)[2]) == len(points)
 
 
 def test_the_refinement_makes_a_monitor_called_clutter_a_screen() -> None:

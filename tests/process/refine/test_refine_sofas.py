@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from helpers_refine import UP, counted_shown_and_switched_off, grid_patch, labelled
+from helpers_refine import (
+    FLOOR_Z0,
+    UP,
+    clustered,
+    counted_shown_and_switched_off,
+    grid_patch,
+    labelled,
+)
 
 from capture.recording import Label
 from process.refine import RefineConfig, refine
@@ -44,12 +51,8 @@ def test_a_sofa_narrower_than_a_sofa_becomes_a_chair() -> None:
         grid_patch((12.0, 12.6), (0.0, 0.6), z=0.45, step=0.02),
         base + np.array([6.0, 0.0, 0.0], np.float32),
     ]
-    sizes = [len(p) for p in parts]
-    points = np.concatenate(parts).astype(np.float32)
-    labels = np.full(len(points), SOFA, np.uint8)
-    clusters = np.repeat(np.arange(1, 10, dtype=np.int32), sizes)
-    floor = np.array([0.0, 0.0, -1.0, 0.0])
-    out, ids, changed = narrow_sofas(points, labels, clusters, floor, UP)
+    points, labels, clusters = clustered(parts, SOFA)
+    out, ids, changed = narrow_sofas(points, labels, clusters, FLOOR_Z0, UP)
     chairs = np.flatnonzero(np.isin(clusters, [4, 5, 6]))
     assert np.array_equal(changed, chairs)
     assert (out[chairs] == CHAIR).all() and np.array_equal(ids, clusters)
@@ -57,7 +60,7 @@ def test_a_sofa_narrower_than_a_sofa_becomes_a_chair() -> None:
     assert (labels == SOFA).all()  # the input is not changed in place
     assert len(narrow_sofas(points, labels, clusters, None, UP)[2]) == 0  # no floor: no rule
     alone = clusters != 1  # without the long sofa its cut-off section is a chair's size
-    changed = narrow_sofas(points[alone], labels[alone], clusters[alone], floor, UP)[2]
+    changed = narrow_sofas(points[alone], labels[alone], clusters[alone], FLOOR_Z0, UP)[2]
     assert np.array_equal(changed, np.flatnonzero(np.isin(clusters[alone], [2, 4, 5, 6])))
 
 
