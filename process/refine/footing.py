@@ -18,19 +18,19 @@ were before (unlabelled) when
 Standing classes (table, chair, person, plant, sofa) reach down to the floor by design and are
 left; a table's growth above its top is held by regrowth's `table_top_m`.
 
-Written here because no library bounds region growing by a support surface; the normals are a
-plain eigen-decomposition of neighbourhoods (SciPy's k-d tree, graph.py).
+Written here because no library bounds region growing by a support surface; the normals are
+Open3D's, the footprint's grid `plane_grid.over_footprint`'s.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
+import open3d as o3d
 
 from capture.recording import Label
-from process.refine.graph import kd_tree, members
-from process.refine.plane_grid import plane_uv
+from process.refine.graph import members
+from process.refine.plane_grid import over_footprint, plane_uv
 
 ON_SURFACES = (Label.TV_MONITOR, Label.CLUTTER)  # classes that stand on something
 FOOT_M = 0.03  # an object's foot: its own points within this of its lowest
@@ -71,42 +71,30 @@ def beyond_feet(
         new = new[height[new] <= low + FOOT_M]
         if len(new) == 0:
             continue
-        beyond = rows[new[~_in_footprint(uv[own[height[own] <= low + FOOT_M]], uv[new])]]
+        foot = uv[own[height[own] <= low + FOOT_M]]
+        inside = over_footprint(foot, uv[new], CELL_M, diagonal=True, grow=GROW_CELLS)
+        beyond = rows[new[~inside]]
         if len(beyond):
             found.append(beyond[_level(points, beyond, up)])
     return np.sort(np.concatenate(found)) if found else none
 
 
-def _in_footprint(
-    foot: npt.NDArray[np.float32], query: npt.NDArray[np.float32]
-) -> npt.NDArray[np.bool_]:
-    """Return whether each query point (plan) lies in the foot's cells grown by `GROW_CELLS`."""
-    low = np.minimum(foot.min(axis=0), query.min(axis=0))
-    cell_of_foot = ((foot - low) / CELL_M).astype(np.int64)
-    cell_of_query = ((query - low) / CELL_M).astype(np.int64)
-    shape = np.maximum(cell_of_foot.max(axis=0), cell_of_query.max(axis=0)) + 1
-    grid = np.zeros(shape, bool)
-    grid[cell_of_foot[:, 0], cell_of_foot[:, 1]] = True
-    grid = ndimage.binary_dilation(grid, structure=np.ones((3, 3), bool), iterations=GROW_CELLS)
-    inside: npt.NDArray[np.bool_] = grid[cell_of_query[:, 0], cell_of_query[:, 1]]
-    return inside
-
-
 def _level(
     points: npt.NDArray[np.floating], rows: npt.NDArray[np.intp], up: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.bool_]:
-    """Return whether each point's surface is level: its neighbourhood's normal near up.
+    """Return whether each point's surface is level: its normal within `LEVEL_DEG` of up.
 
-    The neighbourhood is taken among the cloud's points near them only (their box grown by
-    `_MARGIN_M`): a tree of the whole map would cost more than the step.
+    The normals are Open3D's, of the `NORMAL_K` nearest points, estimated over the cloud's
+    points near them only (their box grown by `_MARGIN_M`): normals of the whole map would cost
+    more than the step.
     """
-    centre = np.asarray(points[rows], np.float64)
+    centre = points[rows]
     low, high = centre.min(axis=0) - _MARGIN_M, centre.max(axis=0) + _MARGIN_M
-    near = np.asarray(points[np.all((points >= low) & (points <= high), axis=1)], np.float64)
-    k = min(NORMAL_K, len(near))
-    _, nb = kd_tree(near).query(centre, k)
-    hood = near[nb.reshape(len(rows), k)]
-    hood = hood - hood.mean(axis=1, keepdims=True)
-    _, axes = np.linalg.eigh(np.einsum("nki,nkj->nij", hood, hood))
-    level: npt.NDArray[np.bool_] = np.abs(axes[:, :, 0] @ up) >= np.cos(np.radians(LEVEL_DEG))
+    near = np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
+    cloud = o3d.geometry.PointCloud(
+        o3d.utility.Vector3dVector(np.asarray(points[near], np.float64))
+    )
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(NORMAL_K))
+    normals = np.asarray(cloud.normals)[np.searchsorted(near, rows)]
+    level: npt.NDArray[np.bool_] = np.abs(normals @ up) >= np.cos(np.radians(LEVEL_DEG))
     return level

@@ -83,19 +83,22 @@ def over_footprint(
     cell_m: float,
     *,
     diagonal: bool = False,
+    grow: int = 1,
 ) -> npt.NDArray[np.bool_]:
-    """Return which points (u, v) lie in a cell of `uv_own`'s points or next to one.
+    """Return which points (u, v) lie in a cell of `uv_own`'s points or near one.
 
-    Next to: sharing a side with it, or with `diagonal` a corner too.
+    Near: within `grow` steps of cells sharing a side, or with `diagonal` a corner too.
     """
     if len(uv) == 0 or len(uv_own) == 0:
         return np.zeros(len(uv), bool)
-    origin = uv_own.min(axis=0) - cell_m  # one cell of margin for the neighbours
+    origin = uv_own.min(axis=0) - grow * cell_m  # a margin of `grow` cells for the neighbours
     own = ((uv_own - origin) / cell_m).astype(np.int64)
-    shape = tuple(int(v) + 2 for v in own.max(axis=0))
+    shape = tuple(int(v) + 1 + grow for v in own.max(axis=0))
     grid = np.zeros(shape, bool)
     grid[own[:, 0], own[:, 1]] = True
-    grid = ndimage.binary_dilation(grid, np.ones((3, 3), bool) if diagonal else None)
+    if grow > 0:  # SciPy reads 0 iterations as "until nothing changes"
+        structure = np.ones((3, 3), bool) if diagonal else None
+        grid = ndimage.binary_dilation(grid, structure, iterations=grow)
     ij = np.floor((uv - origin) / cell_m).astype(np.int64)
     inside: npt.NDArray[np.bool_] = np.all((ij >= 0) & (ij < np.array(shape)), axis=1)
     inside[inside] = grid[ij[inside, 0], ij[inside, 1]]

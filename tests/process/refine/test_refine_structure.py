@@ -192,3 +192,14 @@ def test_over_footprint_takes_the_cells_of_the_points_and_their_neighbours() -> 
     assert over_footprint(own, probe, 0.1).tolist() == [True, True, False, False]
     assert over_footprint(own, probe, 0.1, diagonal=True).tolist() == [True, True, True, False]
     assert over_footprint(own, probe[:0], 0.1).shape == (0,)
+
+
+def test_over_footprint_grows_by_as_many_cells_as_asked() -> None:
+    """Grown by two cells the footprint takes the point two cells away (and with diagonals the
+    one two cells off on both axes), not three; grown by none, its own cell only."""
+    own = np.array([[0.01, 0.01], [0.09, 0.09]], np.float32)
+    probe = np.array([[0.25, 0.05], [0.25, 0.25], [0.35, 0.05], [0.15, 0.05]], np.float32)
+    grown = over_footprint(own, probe, 0.1, diagonal=True, grow=2)
+    assert grown.tolist() == [True, True, False, True]
+    assert over_footprint(own, probe, 0.1, grow=2).tolist() == [True, False, False, True]
+    assert over_footprint(own, probe, 0.1, grow=0).tolist() == [False, False, False, False]
