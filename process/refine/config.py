@@ -159,6 +159,8 @@ class RefineConfig:
     screens: bool = True  # a thin upright clutter panel off the floor is a screen (screens.py)
     beyond_feet: bool = True  # what regrowth gave a screen or clutter on the level surface it
     # stands on, beyond its foot, is given back (footing.py)
+    structure_noise_m: float = 0.03  # a point left unlabelled that the network calls floor, wall
+    # or ceiling, this close to a plane of that class, takes that label (surface_noise.py; 0: off)
     flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
     # apart from every other object, is wall (flat.py)
     inside_objects_share: float = 0.6  # a structure cluster off the planes whose labelled
@@ -222,6 +224,7 @@ class RefineConfig:
             "tall_chairs": False,
             "screens": False,
             "beyond_feet": False,
+            "structure_noise_m": 0.0,
             "fill_tops": False,
             "flat_walls": False,
         }
@@ -272,6 +275,7 @@ class RefineConfig:
             "bare_face_rim_share": (self.bare_face_rim_share, 0.0, 1.0),
             "face_min_area_m2": (self.face_min_area_m2, 0.0, 100.0),
             "floor_label_max_m": (self.floor_label_max_m, 0.0, 100.0),
+            "structure_noise_m": (self.structure_noise_m, 0.0, 1.0),
             "table_min_area_m2": (self.table_min_area_m2, 0.0, 100.0),
             "table_tolerance_deg": (self.table_tolerance_deg, 0.0, 45.0),
             "table_min_object_share": (self.table_min_object_share, 0.0, 1.0),

@@ -35,6 +35,7 @@ from process.refine.regrowth import regrow
 from process.refine.screens import flat_screens
 from process.refine.seams import seam_vote
 from process.refine.sofas import narrow_sofas
+from process.refine.surface_noise import network_surfaces
 from process.refine.tabletop import tabletop_objects
 from process.refine.tops import left_on_tops, tops_called_seats
 from process.refine.walls import behind_walls, floor_said_low, main_floor, wall_bands
@@ -139,6 +140,9 @@ class RefineResult:
     beyond_feet: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices regrowth gave a screen or clutter on the level surface under it, beyond its
     # foot, given back (footing.py)
+    structure_noise: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    # input indices left unlabelled that take the network's floor, wall or ceiling label by a
+    # plane of that class (surface_noise.py; SOR's among them survive)
     top_filled: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     # input indices on a table's top the network calls table, left 0, given the table (tops.py)
 
@@ -148,6 +152,7 @@ class RefineResult:
         keep = np.ones(len(self.fused), bool)
         keep[self.sor_outliers] = False
         keep[self.strays] = True
+        keep[self.structure_noise] = True
         return keep
 
     def final(self) -> LabelledCloud:
@@ -438,6 +443,13 @@ def refine(
             ("screens", flat_screens, cfg.screens),
         )
     )
+    noise = np.zeros(0, np.intp)
+    if cfg.structure_noise_m > 0:  # the network's floor, wall, ceiling near their planes
+        noise = network_surfaces(
+            cloud.points, labels_iii, network, planes.planes, cfg.structure_noise_m
+        )
+        labels_iii[noise] = network[noise]
+        lap("structure_noise")
     seconds["total"] = time.perf_counter() - start
     logger.info("refined %d points in %.2f s: %s", len(cloud), seconds["total"], seconds)
     return RefineResult(
@@ -450,7 +462,7 @@ def refine(
         seats=floor_votes["seats"], tops=on_tops, flat=floor_votes["flat"], flat_walls=on_walls,
         low_chairs=floor_votes["low_chairs"], top_filled=top_filled,
         narrow_sofas=after["narrow_sofas"], tall_chairs=after["tall_chairs"],
-        screens=after["screens"], beyond_feet=off_feet,
+        screens=after["screens"], beyond_feet=off_feet, structure_noise=noise,
     )  # fmt: skip
 
 

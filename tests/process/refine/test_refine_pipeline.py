@@ -56,7 +56,7 @@ def test_f1_over_target_classes_rises_from_phase_i_to_iii(office: SyntheticScene
     assert {p.label for p in result.planes.planes} >= {2, 3}
     steps = {"planes", "sor", "dbscan", "regrowth", "raised", "legs", "seats", "tops", "seams"}
     steps |= {"flat", "flat_walls", "pieces", "low_chairs", "fill_tops", "narrow_sofas"}
-    steps |= {"tall_chairs", "screens", "beyond_feet"}
+    steps |= {"tall_chairs", "screens", "beyond_feet", "structure_noise"}
     assert set(result.seconds) == steps | {"total"}
     for entry in result.dbscan.values():
         assert entry.choice is not None and entry.curves is not None
