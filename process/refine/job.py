@@ -149,9 +149,7 @@ def refinement_metrics(
         "screens": len(result.screens),
         "beyond_feet": len(result.beyond_feet),
         "structure_noise": len(result.structure_noise),
-        "structure_noise_from_sor": int(
-            np.isin(result.structure_noise, result.sor_outliers).sum()
-        ),
+        "structure_noise_from_sor": int(np.isin(result.structure_noise, result.sor_outliers).sum()),
         "tops_filled": len(result.top_filled),
         "sunk_under_tables": result.sunk,
         "orphans_adopted": len(result.orphans),

@@ -59,9 +59,7 @@ def test_the_networks_structure_near_its_plane_takes_its_label_and_nothing_else(
     left = np.where(structural, result.planes.labels, 0).astype(np.uint8)
     planes = result.planes.planes
     taken = network_surfaces(points, left, labels, planes, 0.03)
-    near = np.concatenate(
-        [rows[k] for k in ("floor", "wall", "under", "over", "before", "strays")]
-    )
+    near = np.concatenate([rows[k] for k in ("floor", "wall", "under", "over", "before", "strays")])
     assert np.isin(taken, near[~structural[near]]).all()  # floor and wall RANSAC left too
     layered = np.concatenate([rows[k] for k in ("under", "over", "before", "strays")])
     assert np.isin(layered[~structural[layered]], taken).mean() > 0.99  # noise: 2.5 +- 0.6 cm
@@ -88,9 +86,7 @@ def test_the_refinement_keeps_the_networks_surface_noise_counted_and_switched_of
     rows = {k: np.flatnonzero(np.isin(keep, v)) for k, v in rows.items()}
     cloud = labelled(points, labels)
     off = refine(cloud, RefineConfig(structure_noise_m=0.0), up=UP)
-    near = np.concatenate(
-        [rows[k] for k in ("floor", "wall", "under", "over", "before", "strays")]
-    )
+    near = np.concatenate([rows[k] for k in ("floor", "wall", "under", "over", "before", "strays")])
     left = np.sort(near[(off.labels_iii[near] == 0)])  # the planes' own give-backs too
     assert np.isin(rows["strays"], left).all() and len(np.setdiff1d(left, rows["floor"])) > 20
     assert len(np.intersect1d(left, off.sor_outliers)) > 0
