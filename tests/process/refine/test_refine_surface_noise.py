@@ -23,7 +23,7 @@ def _scene() -> tuple[Points, npt.NDArray[np.uint8], dict[str, npt.NDArray[np.in
     wall 2.5 cm under the floor (no wall there); a chair's seat the network labels chair; three
     points of its floor 2.5 cm off the floor in the floor's far corners.
     Returns points, labels and each part's rows by name."""
-    parts = {
+    parts: dict[str, npt.NDArray[np.floating]] = {
         "floor": grid_patch((0.0, 4.0), (0.0, 4.0), step=0.02),
         "wall": grid_patch((0.0, 4.0), (0.0, 2.5), step=0.02)[:, [2, 0, 1]] + [4.0, 0.0, 0.0],
         "under": grid_patch((0.5, 1.5), (0.5, 1.5), z=-0.025, step=0.06),
@@ -33,7 +33,7 @@ def _scene() -> tuple[Points, npt.NDArray[np.uint8], dict[str, npt.NDArray[np.in
         "beyond": grid_patch((-1.5, -1.0), (0.5, 1.5), z=-0.025, step=0.06),
         "walls_word": grid_patch((2.0, 3.0), (2.5, 3.5), z=-0.025, step=0.06),
         "seat": grid_patch((1.0, 1.45), (2.0, 2.45), z=0.45, step=0.02),
-        "strays": np.array([(0.1, 3.9, -0.025), (3.9, 3.9, 0.025), (3.9, 0.1, -0.025)]),
+        "strays": np.array([(0.1, 3.9, -0.025), (3.9, 3.9, 0.025), (3.9, 0.1, -0.025)], np.float32),
     }
     said = {"before": WALL, "walls_word": WALL, "wall": WALL, "seat": CHAIR}
     points = np.concatenate(list(parts.values())).astype(np.float32)
