@@ -159,6 +159,8 @@ class RefineConfig:
     screens: bool = True  # a thin upright clutter panel off the floor is a screen (screens.py)
     beyond_feet: bool = True  # what regrowth gave a screen or clutter on the level surface it
     # stands on, beyond its foot, is given back (footing.py)
+    standing_bases: bool = True  # a segment the network saw in part (15 %), under an object of
+    # a standing class it calls it, joins that object: a chair's base, a table's leg (orphans.py)
     structure_noise_m: float = 0.03  # a point left unlabelled that the network calls floor, wall
     # or ceiling, this close to a plane of that class, takes that label (surface_noise.py; 0: off)
     flat_walls: bool = True  # a standing-class cluster flat in a wall's band, over the floor and
@@ -225,6 +227,7 @@ class RefineConfig:
             "screens": False,
             "beyond_feet": False,
             "structure_noise_m": 0.0,
+            "standing_bases": False,
             "fill_tops": False,
             "flat_walls": False,
         }

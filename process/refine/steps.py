@@ -327,12 +327,14 @@ def refine(
             labels_iii, clusters_iii, orphans = adopt_orphans(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
                 misnamed=planes.not_floor,
+                up=planes.up if cfg.standing_bases else None,
             )  # fmt: skip
             regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
         if cfg.lone_objects:  # what the network saw apart from every object, DBSCAN dropped
             labels_iii, clusters_iii, lone = lone_objects(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
                 min_points=cfg.min_cluster_points, misnamed=planes.not_floor,
+                up=planes.up if cfg.standing_bases else None,
             )  # fmt: skip
             regrown = np.union1d(regrown, lone)  # shown with the regrown points too
         if cfg.rejoin_strays:  # sparse foliage SOR and DBSCAN took for noise, to its plant
