@@ -76,6 +76,7 @@ def adopt_orphans(
     *,
     misnamed: npt.NDArray[np.bool_] | None = None,
     up: npt.NDArray[np.float64] | None = None,
+    ground: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
     """Return (labels, clusters, adopted rows): unlabelled segments given to the class they touch.
 
@@ -90,7 +91,9 @@ def adopt_orphans(
             the floor): where a segment has few contacts, they count as seen (as in
             `lone_objects`) and its object labels name the class.
         up: gravity-up; with it, a segment seen too little to join what it touches joins the
-            object of a standing class above it (`_host_above`).
+            object of a standing class above it (`_host_above`), bar its points in `ground`.
+        ground: (N,) the floor plane's inliers (RANSAC's band): floor its tightened band gave
+            back, which a base's segment takes along where it touches the floor.
     """
     labels, clusters = labels.copy(), clusters.copy()
     found = _unlabelled_segments(points, labels, clusters, rows, 1)
@@ -103,13 +106,10 @@ def adopt_orphans(
         members = np.flatnonzero(segment == seg)
         contact = held[nearest[members[touching[members]]]]
         if np.mean(said[rows[members]] != 0) < SAID:  # every segment here has a contact
-            host = 0 if up is None else _host_above(
-                points, labels, clusters, rows[members], said[rows[members]], up
-            )  # fmt: skip
-            if host:  # seen in part, under its own object: a chair's base, a table's leg
-                labels[rows[members]] = labels[clusters == host][0]
-                clusters[rows[members]] = host
-                adopted.append(rows[members])
+            if up is not None:  # seen in part, under its own object: a chair's base, a leg
+                adopted.append(
+                    _join_host(points, labels, clusters, rows[members], said, up, ground)
+                )
             continue
         classes, counts = np.unique(labels[contact], return_counts=True)
         best = int(classes[np.argmax(counts)])
@@ -137,6 +137,7 @@ def lone_objects(
     min_points: int,
     misnamed: npt.NDArray[np.bool_] | None = None,
     up: npt.NDArray[np.float64] | None = None,
+    ground: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.int32], npt.NDArray[np.intp]]:
     """Return (labels, clusters, rows made objects): unlabelled segments touching no object.
 
@@ -145,7 +146,8 @@ def lone_objects(
     "floor" above the floor): they count as seen, and the class is the object labels' majority.
     Each such segment becomes a cluster of its own (ids above every id in use). With `up`
     (gravity-up), a segment the network saw too little of to be an object on its own joins the
-    object of a standing class above it (`_host_above`).
+    object of a standing class above it (`_host_above`), bar its points in `ground` (as in
+    `adopt_orphans`).
     """
     labels, clusters = labels.copy(), clusters.copy()
     found = _unlabelled_segments(points, labels, clusters, rows, max(min_points, 1))
@@ -165,13 +167,31 @@ def lone_objects(
             next_id += 1
             made.append(members)
         elif up is not None:  # seen in part, under its own object: a chair's base, a leg
-            host = _host_above(points, labels, clusters, members, said[members], up)
-            if host:
-                labels[members] = labels[clusters == host][0]
-                clusters[members] = host
-                made.append(members)
+            made.append(_join_host(points, labels, clusters, members, said, up, ground))
     done = np.sort(np.concatenate(made)) if made else np.zeros(0, np.intp)
     return labels, clusters, done
+
+
+def _join_host(
+    points: npt.NDArray[np.floating],
+    labels: npt.NDArray[np.uint8],
+    clusters: npt.NDArray[np.int32],
+    members: npt.NDArray[np.intp],
+    said: npt.NDArray[np.uint8],
+    up: npt.NDArray[np.float64],
+    ground: npt.NDArray[np.bool_] | None,
+) -> npt.NDArray[np.intp]:
+    """Give a segment, bar its `ground` points, to the object above it (in place); return it.
+
+    Nothing changes (and nothing is returned) where `_host_above` finds no host.
+    """
+    if ground is not None:
+        members = members[~ground[members]]
+    host = _host_above(points, labels, clusters, members, said[members], up) if len(members) else 0
+    if not host:
+        return np.zeros(0, np.intp)
+    labels[members], clusters[members] = labels[clusters == host][0], host
+    return members
 
 
 def _host_above(

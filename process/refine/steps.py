@@ -286,12 +286,12 @@ def refine(
             on_bare[face] = True
         faces = on_bare[objects]
         keep_out |= faces
+        on_floor = np.zeros(len(cloud), bool)  # RANSAC's floor band (its inliers)
+        for plane in planes.planes:
+            if plane.label == Label.FLOOR:
+                on_floor[plane.indices] = True
         leaf = None
         if cfg.floor_leaf:  # unlabelled floor-plane points join objects but relay no growth
-            on_floor = np.zeros(len(cloud), bool)
-            for plane in planes.planes:
-                if plane.label == Label.FLOOR:
-                    on_floor[plane.indices] = True
             leaf = on_floor[objects] & (labels == 0)
         n_behind = int((behind & (labels == 0)).sum())
         n_faces = int((faces & (labels == 0)).sum())
@@ -327,14 +327,14 @@ def refine(
             labels_iii, clusters_iii, orphans = adopt_orphans(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
                 misnamed=planes.not_floor,
-                up=planes.up if cfg.standing_bases else None,
+                up=planes.up if cfg.standing_bases else None, ground=on_floor,
             )  # fmt: skip
             regrown = np.union1d(regrown, orphans)  # shown with the regrown points too
         if cfg.lone_objects:  # what the network saw apart from every object, DBSCAN dropped
             labels_iii, clusters_iii, lone = lone_objects(
                 cloud.points, labels_iii, clusters_iii, objects[~keep_out], cloud.labels,
                 min_points=cfg.min_cluster_points, misnamed=planes.not_floor,
-                up=planes.up if cfg.standing_bases else None,
+                up=planes.up if cfg.standing_bases else None, ground=on_floor,
             )  # fmt: skip
             regrown = np.union1d(regrown, lone)  # shown with the regrown points too
         if cfg.rejoin_strays:  # sparse foliage SOR and DBSCAN took for noise, to its plant

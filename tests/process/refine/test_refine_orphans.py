@@ -331,7 +331,8 @@ def _chair_over_base(x: float = 0.0, every: int = 2, z: float = 0.05) -> Scene:
 def test_a_base_the_network_saw_in_part_under_its_chair_joins_the_chair() -> None:
     """A chair's base 40 cm under its seat, a quarter of it called chair: too little seen to be an
     object on its own (under half), but under a chair, the class the network gives it, it joins
-    that chair (cluster 1), as it does two thirds under. Without `up` it stays unlabelled; so
+    that chair (cluster 1), as it does two thirds under; floor points in the floor plane's band
+    that touch it (`ground`) do not. Without `up` it stays unlabelled; so
     it does 11 % seen, beside the chair rather than under it (a fifth under), over it, split
     between three classes, called a class no object above holds, or a class that does not stand
     on the floor (clutter)."""
@@ -347,6 +348,17 @@ def test_a_base_the_network_saw_in_part_under_its_chair_joins_the_chair() -> Non
     assert len(lone_objects(*beside[:2], beside[2], rows, beside[3], min_points=30, up=UP)[2]) == 0
     half_beside = _chair_over_base(x=0.45)  # a fifth under the seat's cells and neighbours
     assert len(lone_objects(*half_beside[:3], rows, half_beside[3], min_points=30, up=UP)[2]) == 0
+    ring = grid_patch((0.45, 0.6), (0.0, 0.45), z=0.04, step=0.015).astype(np.float64)
+    on_ground = np.r_[points, ring]  # floor its band gave back, touching the base's edge
+    ground = np.r_[np.zeros(len(points), bool), np.ones(len(ring), bool)]
+    grounded = (
+        np.r_[labels, np.zeros(len(ring), np.uint8)],
+        np.r_[clusters, np.zeros(len(ring), np.int32)],
+    )
+    out, _, made = lone_objects(on_ground, *grounded, np.arange(len(on_ground)),
+                                np.r_[said, np.zeros(len(ring), np.uint8)], min_points=30, up=UP,
+                                ground=ground)  # fmt: skip
+    assert np.array_equal(made, np.flatnonzero(base)) and (out[ground] == 0).all()
     most = _chair_over_base(x=0.25)  # two thirds under: it joins
     assert len(lone_objects(*most[:3], rows, most[3], min_points=30, up=UP)[2]) == base.sum()
     split = said.copy()  # chair 40 %, person and sofa 30 %: no class holds most of what it saw
