@@ -390,12 +390,13 @@ def refine(
                 lap(step)
         return moved
 
-    # votes by a cloud's floor plane: seats called table (legs.py), objects flat on it (flat.py),
+    # votes by a cloud's floor plane: objects flat on it (flat.py), seats called table (legs.py;
+    # after flat: a table sheet in the floor's band by a chair's feet is floor, not its seat),
     # chairs lower than a seat (low.py)
     floor_votes = by_floor(
         (
-            ("seats", seats_called_table, cfg.chair_seats),
             ("flat", flat_on_floor, cfg.flat_floor),
+            ("seats", seats_called_table, cfg.chair_seats),
             ("low_chairs", low_chairs, cfg.low_chairs),
         )
     )
