@@ -20,10 +20,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from process.refine.plane_grid import over_footprint, plane_uv
 from process.refine.planes import Plane
-
-EXTENT_CELL_M = 0.1  # a plane's extent: its points' cells of this size and their neighbours
+from process.refine.walls import near_plane
 
 
 def network_surfaces(
@@ -36,7 +34,7 @@ def network_surfaces(
     """Return the points left unlabelled (`labels` 0) that the network's structure label fits.
 
     Each lies within `band_m` of a structural plane whose class the network (`network`) gives
-    it, and over that plane's extent (the 10 cm cells of its removed points, and neighbours).
+    it, and over that plane's extent (`walls.near_plane`, as a noisy wall takes in its noise).
     """
     if band_m <= 0:
         return np.zeros(0, np.intp)
@@ -48,10 +46,7 @@ def network_surfaces(
         candidates = np.flatnonzero(free & (network == plane.label))
         if not len(candidates):
             continue
-        offset = points[candidates].astype(np.float64) @ plane.model[:3] + plane.model[3]
-        candidates = candidates[np.abs(offset) <= band_m]
-        own, uv = (plane_uv(points[i], plane.model) for i in (plane.removed, candidates))
-        taken = candidates[over_footprint(own, uv, EXTENT_CELL_M, diagonal=True)]
+        taken = near_plane(points, plane, candidates, band_m)
         free[taken] = False
         found.append(taken)
     return np.sort(np.concatenate(found)) if found else np.zeros(0, np.intp)

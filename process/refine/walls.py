@@ -308,7 +308,7 @@ def tighten_bands(
 
 
 WIDE_CAP = 3.0  # a noisy wall's band: at most this many plane_distance_m
-EXTENT_CELL_M = 0.1  # a wall's extent: its cells of this size and their neighbours
+EXTENT_CELL_M = 0.1  # a plane's extent: its cells of this size and their neighbours
 
 
 def widen_bands(
@@ -335,11 +335,7 @@ def widen_bands(
             out.append(plane)
             continue
         median, width = band
-        candidates = np.flatnonzero(free)
-        offset = points[candidates].astype(np.float64) @ plane.model[:3] + plane.model[3]
-        candidates = candidates[np.abs(offset - median) <= width]
-        own, uv = (plane_uv(points[i], plane.model) for i in (plane.removed, candidates))
-        taken = candidates[over_footprint(own, uv, EXTENT_CELL_M, diagonal=True)]
+        taken = near_plane(points, plane, np.flatnonzero(free), width, centre=median)
         if len(taken) == 0:
             out.append(plane)
             continue
@@ -347,6 +343,26 @@ def widen_bands(
         note = f"band {width * 100:.1f} cm: {len(taken)} points of its noise taken in"
         out.append(replace(_taken_in(plane, taken, note), noise_taken=len(taken)))
     return tuple(out)
+
+
+def near_plane(
+    points: npt.NDArray[np.float32],
+    plane: Plane,
+    candidates: npt.NDArray[np.intp],
+    width: float,
+    *,
+    centre: float = 0.0,
+) -> npt.NDArray[np.intp]:
+    """Return the candidates within `width` of `centre` along the plane's normal, over its extent.
+
+    The extent: the `EXTENT_CELL_M` cells of the points it removes as structure, and their
+    neighbours (corners too).
+    """
+    offset = points[candidates].astype(np.float64) @ plane.model[:3] + plane.model[3]
+    candidates = candidates[np.abs(offset - centre) <= width]
+    own, uv = (plane_uv(points[i], plane.model) for i in (plane.removed, candidates))
+    inside: npt.NDArray[np.intp] = candidates[over_footprint(own, uv, EXTENT_CELL_M, diagonal=True)]
+    return inside
 
 
 def _taken_in(plane: Plane, taken: npt.NDArray[np.intp], note: str) -> Plane:
